@@ -1,0 +1,29 @@
+# The README's two commands: `make run` (the main job on the default preset)
+# and `make test`. Both build .venv and install what the project needs first.
+VENV  := .venv
+BIN   := $(VENV)/bin
+STAMP := $(VENV)/.installed
+# Debian packages: libLLVM 19 for drjit's CPU backend (LLVM 15 cannot compile its kernels).
+DEBS  := libllvm19
+CORES ?= all
+
+# Rules call the `denali` console script, so the venv must come first on PATH.
+export PATH := $(abspath $(BIN)):$(PATH)
+
+.PHONY: run test setup debs
+
+run: setup
+	snakemake --cores $(CORES)
+
+test: setup
+	python -m pytest
+
+setup: $(STAMP) debs
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || python3 -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $@
+
+debs:
+	@scripts/ensure-debs $(DEBS)

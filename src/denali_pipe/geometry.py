@@ -1,0 +1,372 @@
+"""The world frame of the capture rig: the one source of truth for geometry.
+
+Frame: metres, right-handed, Z up. The origin is the centre of tag 14 on the
+table top; +x runs toward tags 11/13/15, +y toward the relay wall (away from
+the tracking camera). The numbers are the nominal design of a DENALI-style
+rig; the synthetic rig renders from them and the pose stage estimates them
+back from tracking frames.
+
+Conventions
+- A `Pose` maps local coordinates to world: ``world = R @ local + t``.
+- AprilTag frame: x right, y down (as the tag image reads), z *into* the tag,
+  so a face-up tag has R = diag(1, -1, -1). Corners are listed top-left,
+  top-right, bottom-right, bottom-left (OpenCV's ArUco order).
+- Cameras follow OpenCV: x right, y down, z forward; ``R_wc``/``t_wc`` map
+  world points into the camera frame.
+- Histogram bins are sensor-relative optical path length (OPL, metres):
+  bin b covers [HIST_START_OPL + b w, HIST_START_OPL + (b + 1) w) with
+  w = BIN_WIDTH_OPL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# --- time axis -----------------------------------------------------------------
+
+N_BINS = 128
+BIN_WIDTH_OPL = 3.0 / 128  # m of optical path per bin (78 ps)
+HIST_START_OPL = 0.0  # sensor-relative OPL at the left edge of bin 0, m
+
+
+def opl_to_bin(opl: np.ndarray | float) -> np.ndarray | float:
+    """Fractional bin index of a sensor-relative optical path length (m)."""
+    return (np.asarray(opl) - HIST_START_OPL) / BIN_WIDTH_OPL
+
+
+# --- rotations and poses ---------------------------------------------------------
+
+
+def rot_x(deg: float) -> np.ndarray:
+    a = np.deg2rad(deg)
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def rot_z(deg: float) -> np.ndarray:
+    a = np.deg2rad(deg)
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+FACE_UP = np.diag([1.0, -1.0, -1.0])  # tag lying on a table, read from above
+FACE_MINUS_Y = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # tag on the wall, facing -y
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Rigid transform local -> world. R (3, 3), t (3,) in metres."""
+
+    R: np.ndarray
+    t: np.ndarray
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """Map (..., 3) local points to world."""
+        return np.asarray(points) @ self.R.T + self.t
+
+    def __matmul__(self, other: "Pose") -> "Pose":
+        return Pose(self.R @ other.R, self.R @ other.t + self.t)
+
+    def to_dict(self) -> dict:
+        return {"R": self.R.tolist(), "t": self.t.tolist()}
+
+
+def pose(R: np.ndarray, t) -> Pose:
+    return Pose(np.asarray(R, float), np.asarray(t, float))
+
+
+# --- planar rectangles (wall, tables) -----------------------------------------------
+
+
+@dataclass(frozen=True)
+class Rect:
+    """An axis-aligned planar rectangle. `u`, `v` are unit in-plane axes;
+    `size` = (extent along u, extent along v) in metres; `normal` = u x v
+    points to the side the rectangle faces."""
+
+    centre: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    size: tuple[float, float]
+
+    @property
+    def normal(self) -> np.ndarray:
+        return np.cross(self.u, self.v)
+
+    def corners(self) -> np.ndarray:
+        """(4, 3) corners, counter-clockwise seen from the facing side."""
+        hu, hv = self.size[0] / 2 * self.u, self.size[1] / 2 * self.v
+        c = self.centre
+        return np.array([c - hu - hv, c + hu - hv, c + hu + hv, c - hu + hv])
+
+
+def _v(*x) -> np.ndarray:
+    return np.array(x, float)
+
+
+# The NLOS relay wall: 0.93 m wide (x) by 24 in tall (z), its normal exactly -y.
+WALL = Rect(centre=_v(0.8635, 0.8038, 0.3362), u=_v(1, 0, 0), v=_v(0, 0, 1), size=(0.93, 0.6096))
+WALL_ALBEDO = 0.9
+
+# Two 0.78 x 1.524 m tables, tops at z = 0 (tags lie on them).
+TABLES = {
+    14: Rect(centre=_v(0.35, 0.214, 0.0), u=_v(1, 0, 0), v=_v(0, 1, 0), size=(0.78, 1.524)),
+    15: Rect(centre=_v(1.13, 0.214, 0.0), u=_v(1, 0, 0), v=_v(0, 1, 0), size=(0.82, 1.524)),
+}
+
+# --- AprilTags --------------------------------------------------------------------
+
+TAG_FAMILY = "tag36h11"
+TAG_SIZE = 0.06  # black-square edge, m
+OBJECT_TAG_ID = 1
+SENSOR_TAG_ID = 0
+WALL_TAG_IDS = (5, 6, 7)
+TABLE_TAG_IDS = (10, 11, 12, 13, 14, 15)
+WORLD_ORIGIN_TAG_ID = 14
+
+_WALL_TAG_Y = WALL.centre[1] - 0.001  # tags stand 1 mm proud of the wall
+SENSOR_YAW_DEG = -27.0  # the TMF mount (and tag 0) is yawed toward +x
+
+STATIC_TAGS: dict[int, Pose] = {
+    SENSOR_TAG_ID: pose(rot_z(SENSOR_YAW_DEG) @ FACE_UP, (0.470, 0.255, 0.388)),
+    5: pose(FACE_MINUS_Y, (0.431, _WALL_TAG_Y, 0.414)),
+    6: pose(FACE_MINUS_Y, (0.861, _WALL_TAG_Y, 0.128)),
+    7: pose(FACE_MINUS_Y, (1.294, _WALL_TAG_Y, 0.402)),
+    10: pose(FACE_UP, (0.0, 0.763, 0.0)),
+    12: pose(FACE_UP, (0.0, 0.388, 0.0)),
+    14: pose(FACE_UP, (0.0, 0.0, 0.0)),
+    11: pose(FACE_UP, (1.47, 0.763, 0.0)),
+    13: pose(FACE_UP, (1.47, 0.388, 0.0)),
+    15: pose(FACE_UP, (1.47, 0.0, 0.0)),
+}
+
+# Which physical component each tag belongs to (Table 6's "component" column).
+TAG_COMPONENT = {
+    SENSOR_TAG_ID: "lidar",
+    OBJECT_TAG_ID: "object",
+    **{i: "relay_wall" for i in WALL_TAG_IDS},
+    **{i: "table" for i in TABLE_TAG_IDS},
+}
+
+
+def tag_corners_local(size: float = TAG_SIZE) -> np.ndarray:
+    """(4, 3) corners of the black square in the tag frame: TL, TR, BR, BL."""
+    h = size / 2
+    return np.array([[-h, -h, 0.0], [h, -h, 0.0], [h, h, 0.0], [-h, h, 0.0]])
+
+
+# --- cameras ----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole camera. Intrinsics in pixels; R_wc (3, 3), t_wc (3,) map world
+    points to the OpenCV camera frame (x right, y down, z forward)."""
+
+    name: str
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    R_wc: np.ndarray = field(repr=False)
+    t_wc: np.ndarray = field(repr=False)
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1.0]])
+
+    @property
+    def position(self) -> np.ndarray:
+        return -self.R_wc.T @ self.t_wc
+
+    def scaled(self, scale: float) -> "Camera":
+        """The same camera with the image resampled by `scale` (pixel-centre
+        convention: a pixel centre at x maps to (x + 0.5) * scale - 0.5)."""
+        if scale == 1.0:
+            return self
+        return Camera(
+            self.name,
+            int(round(self.width * scale)),
+            int(round(self.height * scale)),
+            self.fx * scale,
+            self.fy * scale,
+            (self.cx + 0.5) * scale - 0.5,
+            (self.cy + 0.5) * scale - 0.5,
+            self.R_wc,
+            self.t_wc,
+        )
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World points (..., 3) -> pixel coordinates (..., 2) and depth (...,) in m."""
+        pc = np.asarray(points) @ self.R_wc.T + self.t_wc
+        z = pc[..., 2]
+        uv = np.stack([self.fx * pc[..., 0] / z + self.cx, self.fy * pc[..., 1] / z + self.cy], -1)
+        return uv, z
+
+    def rays(self) -> np.ndarray:
+        """(height, width, 3) unit world-frame ray directions through pixel centres."""
+        u, v = np.meshgrid(np.arange(self.width), np.arange(self.height))
+        d = np.stack([(u - self.cx) / self.fx, (v - self.cy) / self.fy, np.ones_like(u, float)], -1)
+        d = d @ self.R_wc  # camera -> world: R_wc^T applied on the right-hand side
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def look_at(position, forward, world_up=(0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """World->camera (R, t) for an OpenCV camera at `position` looking along
+    `forward` with no roll (its x axis horizontal)."""
+    position = np.asarray(position, float)
+    z = np.asarray(forward, float)
+    z = z / np.linalg.norm(z)
+    x = np.cross(z, world_up)
+    x = x / np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])  # rows are camera axes in world coordinates
+    return R, -R @ position
+
+
+_TRACKING_POS = _v(0.7326, -0.4123, 1.1489)
+_COLOCATED_POS = _v(0.4591, 0.3206, 0.3726)
+_COLOCATED_FWD = _v(0.451, 0.889, -0.072)
+
+# Pitched 51.4 deg down, 0.74 deg more than the reference's rounded
+# (0.006, 0.634, -0.774): the frame then just holds tag 5's printed margin at
+# the top and tag 14's at the bottom, as the real capture's tag check needs.
+TRACKING_CAMERA = Camera(
+    "tracking", 1280, 720, 923.57, 923.94, 641.69, 365.96,
+    *look_at(_TRACKING_POS, (0.006, 0.6236, -0.7817)),
+)
+COLOCATED_CAMERA = Camera(
+    "colocated", 848, 480, 605.79, 605.37, 426.69, 247.06,
+    *look_at(_COLOCATED_POS, _COLOCATED_FWD),
+)
+
+# --- the TMF8828 sensor ----------------------------------------------------------------
+
+# The co-located camera's pose serves as laser origin and SPAD aperture.
+SENSOR_POSITION = _COLOCATED_POS
+SENSOR_FORWARD = _COLOCATED_FWD / np.linalg.norm(_COLOCATED_FWD)
+# Full field of view (horizontal, vertical) in degrees, tiled by the zones of
+# either SPAD map: the TMF8828 driver's 41 x 52 deg (63 deg diagonal), mounted
+# landscape so that the right-hand zones look at the wall in front of the gantry.
+SENSOR_FOV_DEG = (52.0, 41.0)
+RESOLUTIONS = {"3x3": 3, "8x8": 8}
+
+
+def zone_directions(n: int, samples_per_zone: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit ray directions tiling the FoV of an n x n zone grid.
+
+    Returns (dirs, solid_angle): dirs (n, n, s, s, 3) world-frame unit vectors
+    through a regular s x s sub-grid of each zone (row 0 = top, col 0 = left as
+    the sensor sees it); solid_angle (n, n, s, s) in steradians per ray.
+    """
+    R, _ = look_at(SENSOR_POSITION, SENSOR_FORWARD)
+    th = np.tan(np.deg2rad(SENSOR_FOV_DEG[0] / 2))
+    tv = np.tan(np.deg2rad(SENSOR_FOV_DEG[1] / 2))
+    m = n * samples_per_zone
+    # tangent-plane coordinates of sub-pixel centres
+    xs = (np.arange(m) + 0.5) / m * 2 - 1
+    X, Y = np.meshgrid(xs * th, xs * tv)  # Y: rows, downward in the camera frame
+    d_cam = np.stack([X, Y, np.ones_like(X)], -1)
+    norm = np.linalg.norm(d_cam, axis=-1)
+    d_cam = d_cam / norm[..., None]
+    # solid angle of a tangent-plane cell of area a at unit focal length: a / |d|^3
+    cell = (2 * th / m) * (2 * tv / m)
+    omega = cell / norm**3
+    d_world = d_cam @ R  # R rows are camera axes: camera -> world
+    s = samples_per_zone
+    dirs = d_world.reshape(n, s, n, s, 3).transpose(0, 2, 1, 3, 4)
+    omega = omega.reshape(n, s, n, s).transpose(0, 2, 1, 3)
+    return dirs, omega
+
+
+def intersect_plane(origin: np.ndarray, dirs: np.ndarray, rect: Rect) -> np.ndarray:
+    """Points where rays from `origin` along `dirs` (..., 3) meet the plane of
+    `rect` (..., 3). Rays must not be parallel to the plane."""
+    n = rect.normal
+    t = ((rect.centre - origin) @ n) / (dirs @ n)
+    return origin + t[..., None] * dirs
+
+
+# --- the gantry and the hidden object -------------------------------------------------
+
+N_LOCATIONS = 100
+GRID_SHAPE = (10, 10)
+# Location 0 is nearest the wall and at the largest x. Rows (slow axis) step
+# toward -y, columns (fast axis) toward -x; the path is a serpentine. The step
+# is the measured 3.65 cm (3.556 cm commanded). Positions are the object tag's
+# centre; its face is tilted 3.5 deg about x.
+GANTRY_ORIGIN = _v(1.2581, 0.4718, 0.3488)
+GANTRY_ROW_STEP = _v(0.0, -0.0365, 0.0)
+GANTRY_COL_STEP = _v(-0.0365, 0.0, 0.0)
+OBJECT_TAG_ROTATION = rot_x(-3.5) @ FACE_UP
+# object = tag1 . Rx(-90) . T(0, -0.005, -0.04): the object plate stands
+# vertically 4 cm in front of tag 1 (toward the wall), local y up, local z -> -y.
+OBJECT_MOUNT = pose(rot_x(-90.0), rot_x(-90.0) @ _v(0.0, -0.005, -0.04))
+# The mount post under the object: a box 0.076 (x) by 0.331 (z) by 0.075 (y) m
+# whose top is at the mount point.
+MOUNT_POST_SIZE = (0.076, 0.331, 0.075)
+MOUNT_POST_ALBEDO = 0.3
+
+
+def gantry_row_col(location: np.ndarray | int) -> tuple[np.ndarray, np.ndarray]:
+    """Physical (row, column) indices of gantry location(s) 0..99.
+
+    Row = k // 10 (slow axis). The fast axis snakes: even rows visit columns
+    0..9 (toward -x), odd rows 9..0, so the column index counts steps toward -x.
+    """
+    k = np.asarray(location)
+    row = k // GRID_SHAPE[1]
+    step = k % GRID_SHAPE[1]
+    col = np.where(row % 2 == 0, step, GRID_SHAPE[1] - 1 - step)
+    return row, col
+
+
+def tag1_position(location: np.ndarray | int) -> np.ndarray:
+    """World position(s) (..., 3) of the object tag's centre at gantry location(s)."""
+    row, col = gantry_row_col(location)
+    return GANTRY_ORIGIN + np.asarray(row)[..., None] * GANTRY_ROW_STEP + np.asarray(col)[..., None] * GANTRY_COL_STEP
+
+
+def tag1_pose(location: int) -> Pose:
+    return pose(OBJECT_TAG_ROTATION, tag1_position(location))
+
+
+def object_pose(location: int) -> Pose:
+    """Local object frame (mesh coordinates) -> world at a gantry location."""
+    return tag1_pose(location) @ OBJECT_MOUNT
+
+
+def select_locations(n: int) -> np.ndarray:
+    """`n` gantry locations spread evenly over the serpentine path (all 100 for n=100)."""
+    if not 1 <= n <= N_LOCATIONS:
+        raise ValueError(f"number of locations must be 1..{N_LOCATIONS}, got {n}")
+    return np.unique(np.round(np.linspace(0, N_LOCATIONS - 1, n)).astype(int))
+
+
+def wall_distance(points: np.ndarray) -> np.ndarray:
+    """Distance (m) of world points (..., 3) in front of the relay wall plane."""
+    return (WALL.centre - np.asarray(points)) @ (-WALL.normal)
+
+
+# --- TMF8828 firmware per SPAD map ------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Firmware:
+    """Capture settings of one TMF8828 mode. Photons per zone scale with
+    `kilo_iterations` (laser pulses / 1000) and with the zone's solid angle."""
+
+    spad_map: int
+    period_ms: int
+    kilo_iterations: int
+
+
+FIRMWARE = {
+    "3x3": Firmware(spad_map=6, period_ms=16, kilo_iterations=10_000),
+    "8x8": Firmware(spad_map=15, period_ms=132, kilo_iterations=10),
+}
+REFERENCE_RESOLUTION = "3x3"  # photometric parameters are stated for a 3x3 zone

@@ -1,0 +1,1 @@
+"""Readers for the release layout and raw capture streams."""

@@ -1,0 +1,39 @@
+"""Reading a release-layout capture set folder `<set>_NLOSdata/`."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from denali_pipe.geometry import N_BINS
+
+_NNN = re.compile(r"^(\d{3})\.npy$")
+
+
+def histogram_files(set_dir: Path) -> dict[int, Path]:
+    """{gantry location: spad_histogram/NNN.npy} of a set folder, sorted by location."""
+    folder = Path(set_dir) / "spad_histogram"
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{set_dir}: no spad_histogram/ folder")
+    files = {}
+    for p in sorted(folder.iterdir()):
+        m = _NNN.match(p.name)
+        if m is None:
+            raise ValueError(f"{p}: unexpected file in spad_histogram/ (expected NNN.npy)")
+        files[int(m[1])] = p
+    return files
+
+
+def load_histogram(path: Path, n_zones: int) -> np.ndarray:
+    """One location's histograms (repeats, n, n, N_BINS) int32, checked."""
+    try:
+        h = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as e:
+        raise ValueError(f"{path}: unreadable .npy ({e})") from None
+    if h.ndim != 4 or h.shape[1:] != (n_zones, n_zones, N_BINS):
+        raise ValueError(f"{path}: expected shape (repeats, {n_zones}, {n_zones}, {N_BINS}), found {h.shape}")
+    if not np.issubdtype(h.dtype, np.integer):
+        raise ValueError(f"{path}: expected integer counts, found dtype {h.dtype}")
+    return h

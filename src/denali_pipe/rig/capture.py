@@ -1,0 +1,215 @@
+"""Synthesise one capture set in the release layout or as a raw pickle stream.
+
+Release layout (what the real rig's converter writes):
+
+    <set>_NLOSdata/
+      spad_histogram/NNN.npy     (repeats, n, n, 128) int32, NNN = gantry location
+      tracking_rgb/NNN.png       BGR uint8
+      tracking_depth/NNN.png     uint16, mm
+      colocated_rgb/NNN.png      BGR uint8
+      colocated_depth/NNN.png    uint16, mm
+      metadata.json              the capture's metadata record
+      rig_truth.json             every true parameter (validation only)
+
+Pickle stream `<set>_short_NLOSdata.pkl`: the metadata record, then one
+record per location {iter, histogram, spad_realsense_data,
+tracking_realsense_data}, as the capture script writes it; the rig's truth
+goes beside it as `<set>_rig_truth.json`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import pickle
+from pathlib import Path
+from contextlib import ExitStack
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from denali_pipe import geometry as geo
+from denali_pipe.atomic import atomic_dir, atomic_file
+from denali_pipe.capture_sets import PICKLE_SUFFIX, CaptureSet
+from denali_pipe.objects import ObjectSpec
+from denali_pipe.rig.frames import frame_tags, render_frame
+from denali_pipe.rig.histograms import Photometry, Scatterer, counts_from_transport, sample_counts, transport
+from denali_pipe.rig.scene import mount_scatterer, object_scatterer
+from denali_pipe.seeds import rng_for
+
+PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1]  # fast; ingest recompresses anyway
+MODALITIES = ("tracking_rgb", "tracking_depth", "colocated_rgb", "colocated_depth")
+
+
+def _cameras(rig_cfg: dict) -> dict[str, geo.Camera]:
+    frames = rig_cfg["frames"]
+    return {
+        "tracking": geo.TRACKING_CAMERA.scaled(frames["tracking_scale"]),
+        "colocated": geo.COLOCATED_CAMERA.scaled(frames["colocated_scale"]),
+    }
+
+
+def _intrinsics(cam: geo.Camera) -> dict:
+    return {"width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy}
+
+
+def _camera_record(cam: geo.Camera) -> dict:
+    return {**_intrinsics(cam), "R_world_to_camera": cam.R_wc.tolist(), "t_world_to_camera": cam.t_wc.tolist()}
+
+
+def metadata_record(cs: CaptureSet, locations: np.ndarray, rig_cfg: dict) -> dict:
+    """The capture's metadata record (the fields the real capture script writes,
+    plus the firmware and camera settings). No wall-clock time, so reruns are
+    byte-identical."""
+    fw = geo.FIRMWARE[cs.resolution]
+    cams = _cameras(rig_cfg)
+    return {
+        "object": cs.object,
+        "size": cs.size,
+        "light": cs.light,
+        "spad_res": cs.resolution,
+        "range": "short",
+        "samples": rig_cfg["repeats"],
+        "grid": list(geo.GRID_SHAPE),
+        "locations": [int(k) for k in locations],
+        "n_bins": geo.N_BINS,
+        "bin_width_opl_m": geo.BIN_WIDTH_OPL,
+        "spad_map": fw.spad_map,
+        "period_ms": fw.period_ms,
+        "kilo_iterations": fw.kilo_iterations,
+        "tracking_camera": _intrinsics(cams["tracking"]),
+        "colocated_camera": _intrinsics(cams["colocated"]),
+        "source": "denali-pipe synthetic rig",
+    }
+
+
+def truth_record(cs: CaptureSet, spec: ObjectSpec | None, locations: np.ndarray, config: dict) -> dict:
+    """Every true parameter of the set. For validation only: no stage reads it."""
+    rig = config["rig"]
+    return {
+        "set": cs.name,
+        "seed": config["seed"],
+        "object": None if spec is None else spec.to_dict(),
+        "material": None if spec is None else dataclasses.asdict(spec.material_params),
+        "mount_post": cs.object != "NOOBJECTMOUNT",
+        "photometry": rig["photometry"],
+        "firmware": dataclasses.asdict(geo.FIRMWARE[cs.resolution]),
+        "sensor": {"position": geo.SENSOR_POSITION.tolist(), "forward": geo.SENSOR_FORWARD.tolist(), "fov_deg": list(geo.SENSOR_FOV_DEG)},
+        "wall": {"centre": geo.WALL.centre.tolist(), "size": list(geo.WALL.size), "normal": geo.WALL.normal.tolist()},
+        "cameras": {name: _camera_record(cam) for name, cam in _cameras(rig).items()},
+        "static_tags": {str(i): p.to_dict() for i, p in geo.STATIC_TAGS.items()},
+        "locations": {
+            str(int(k)): {
+                "tag1": geo.tag1_pose(int(k)).to_dict(),
+                "object": geo.object_pose(int(k)).to_dict(),
+                "wall_distance_m": float(geo.wall_distance(geo.object_pose(int(k)).t)),
+            }
+            for k in locations
+        },
+    }
+
+
+def _scenes(cs: CaptureSet, spec: ObjectSpec | None, config: dict) -> Iterator[tuple[int, list[Scatterer]]]:
+    """(gantry location, hidden scene) for every location the config asks for."""
+    for k in map(int, geo.select_locations(config["rig"]["n_locations"])):
+        scene = [] if cs.object == "NOOBJECTMOUNT" else [mount_scatterer(k)]
+        if spec is not None:
+            scene.append(object_scatterer(spec, cs.size, k))
+        yield k, scene
+
+
+def _record(cs: CaptureSet, k: int, light: np.ndarray, config: dict) -> dict:
+    """One location of one set: the histograms of every repeat and both cameras' RGB-D frames.
+    `light` is the scene's transport at the set's resolution."""
+    rig = config["rig"]
+    phot = Photometry.from_config(rig["photometry"])
+    mean = counts_from_transport(cs.resolution, cs.light_on, light, phot)
+    hist = np.stack([sample_counts(mean, phot, rng_for(config["seed"], cs.name, k, r)) for r in range(rig["repeats"])])
+    frames = {
+        name: render_frame(cam, frame_tags(k, name), cs.light_on, rng_for(config["seed"], cs.name, k, name))
+        for name, cam in _cameras(rig).items()
+    }
+    return {"iter": k, "histogram": hist, "frames": frames}
+
+
+def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, outs: list[Path], fmt: str) -> None:
+    """Write capture sets of one object and size (any resolutions and lightings)
+    to `outs`: release folders (fmt `release`) or pickle streams (fmt `pickle`).
+    Each output is written atomically; the light transport of a location is
+    computed once per resolution and shared by both lightings."""
+    if len({(s.object, s.size) for s in sets}) != 1:
+        raise ValueError(f"synth_sets takes sets of one object and size, got {[s.name for s in sets]}")
+    locations = geo.select_locations(config["rig"]["n_locations"])
+    writer = {"release": _ReleaseWriter, "pickle": _PickleWriter}[fmt]
+    with ExitStack() as stack:
+        writers = [stack.enter_context(writer(out, metadata_record(cs, locations, config["rig"]))) for cs, out in zip(sets, outs)]
+        for k, scene in _scenes(sets[0], spec, config):
+            light = {res: transport(res, scene) for res in sorted({cs.resolution for cs in sets})}
+            for cs, w in zip(sets, writers):
+                w.add(_record(cs, k, light[cs.resolution], config))
+        for cs, w in zip(sets, writers):
+            w.finish(truth_record(cs, spec, locations, config))
+
+
+class _ReleaseWriter:
+    """`<set>_NLOSdata/` in the release layout, built in a temporary folder."""
+
+    def __init__(self, out: Path, metadata: dict):
+        self.out, self.metadata = out, metadata
+        self._ctx = atomic_dir(out)
+
+    def __enter__(self):
+        self.tmp = self._ctx.__enter__()
+        for sub in ("spad_histogram", *MODALITIES):
+            (self.tmp / sub).mkdir()
+        return self
+
+    def add(self, rec: dict) -> None:
+        name = f"{rec['iter']:03d}"
+        np.save(self.tmp / "spad_histogram" / f"{name}.npy", rec["histogram"])
+        for cam, (rgb, depth) in rec["frames"].items():
+            cv2.imwrite(str(self.tmp / f"{cam}_rgb" / f"{name}.png"), rgb, PNG_PARAMS)
+            cv2.imwrite(str(self.tmp / f"{cam}_depth" / f"{name}.png"), depth, PNG_PARAMS)
+
+    def finish(self, truth: dict) -> None:
+        _write_json(self.tmp / "metadata.json", self.metadata)
+        _write_json(self.tmp / "rig_truth.json", truth)
+
+    def __exit__(self, *exc):
+        return self._ctx.__exit__(*exc)
+
+
+class _PickleWriter:
+    """`<set>_short_NLOSdata.pkl`: the metadata record, then one record per
+    location, as the capture script pickles them. The rig's truth goes beside
+    it as `<set>_rig_truth.json`."""
+
+    def __init__(self, out: Path, metadata: dict):
+        self.out, self.metadata = out, metadata
+        self._ctx = atomic_file(out)
+
+    def __enter__(self):
+        self.tmp = self._ctx.__enter__()
+        self.f = open(self.tmp, "wb")
+        pickle.dump(self.metadata, self.f, protocol=4)
+        return self
+
+    def add(self, rec: dict) -> None:
+        record = {"iter": rec["iter"], "histogram": rec["histogram"]}
+        for key, cam in (("spad_realsense_data", "colocated"), ("tracking_realsense_data", "tracking")):
+            rgb, depth = rec["frames"][cam]
+            record[key] = {"aligned_depth_image": depth, "aligned_rgb_image": rgb}
+        pickle.dump(record, self.f, protocol=4)
+
+    def finish(self, truth: dict) -> None:
+        with atomic_file(self.out.with_name(self.out.name.removesuffix(PICKLE_SUFFIX) + "_rig_truth.json")) as tmp:
+            _write_json(tmp, truth)
+
+    def __exit__(self, *exc):
+        self.f.close()
+        return self._ctx.__exit__(*exc)
+
+
+def _write_json(path: Path, obj: dict) -> None:
+    path.write_text(json.dumps(obj, indent=1, sort_keys=True) + "\n")

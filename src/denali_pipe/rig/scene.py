@@ -1,0 +1,41 @@
+"""The hidden scene of one capture set as scatterer samples for the histogram model."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+import numpy as np
+
+from denali_pipe import geometry as geo
+from denali_pipe.objects import ObjectSpec, front_samples, object_mesh, sample_spacing
+from denali_pipe.rig.histograms import Scatterer
+
+MOUNT_SPACING = 0.02  # m; the post is diffuse and dim, so a coarse grid suffices
+
+
+@lru_cache(maxsize=8)
+def _object_samples(spec: ObjectSpec, size: str) -> tuple[np.ndarray, np.ndarray]:
+    return front_samples(object_mesh(spec, size), sample_spacing(size))
+
+
+def object_scatterer(spec: ObjectSpec, size: str, location: int) -> Scatterer:
+    """The object's wall-facing face at a gantry location."""
+    points, area = _object_samples(spec, size)
+    material = spec.material_params
+    pose = geo.object_pose(location)
+    normal = pose.R @ np.array([0.0, 0.0, -1.0])  # local -z faces the wall
+    return Scatterer(pose.apply(points), np.tile(normal, (len(points), 1)), area, material.rho_diffuse, material.rho_retro)
+
+
+def mount_scatterer(location: int) -> Scatterer:
+    """The front face of the mount post, from the mount point down to the table.
+    Occlusion of the post by the object is not modelled: it is static per
+    location and removed by background subtraction."""
+    w, h, _ = geo.MOUNT_POST_SIZE
+    xs = np.arange(-w / 2 + MOUNT_SPACING / 2, w / 2, MOUNT_SPACING)
+    zs = -np.arange(MOUNT_SPACING / 2, h, MOUNT_SPACING)
+    X, Z = np.meshgrid(xs, zs)
+    top = geo.object_pose(location).t
+    points = top + np.stack([X.ravel(), np.zeros(X.size), Z.ravel()], 1)
+    normals = np.tile(-geo.WALL.normal, (len(points), 1))
+    area = np.full(len(points), (w / len(xs)) * MOUNT_SPACING)
+    return Scatterer(points, normals, area, geo.MOUNT_POST_ALBEDO, 0.0)
