@@ -42,7 +42,7 @@ class CaptureSet:
 def parse_set_name(name: str) -> CaptureSet:
     """`A_4inch_3x3_lighton` (optionally with the `_NLOSdata` suffix) -> CaptureSet."""
     stem = name.removesuffix(FOLDER_SUFFIX).removesuffix(PICKLE_SUFFIX)
-    m = _NAME.match(stem)
+    m = _NAME.fullmatch(stem)
     if m is None:
         raise ValueError(
             f"capture set name {name!r} does not parse: expected "

@@ -29,7 +29,13 @@ def cmd_synth(args: argparse.Namespace) -> None:
 
     outs = [Path(p) for p in args.outs]
     sets = [parse_set_name(p.name) for p in outs]
-    spec = None if args.object is None else spec_from_dict(args.object)
+    missing = {"seed", "rig"} - set(args.config)
+    if missing:
+        raise ValueError(f"--config lacks the keys {sorted(missing)}")
+    try:
+        spec = None if args.object is None else spec_from_dict(args.object)
+    except TypeError as e:
+        raise ValueError(f"--object is not an objects-sheet row ({e}): {args.object}") from None
     for cs in sets:
         if (spec is None) != cs.is_background or (spec is not None and spec.name != cs.object):
             raise ValueError(f"capture set {cs.name}: the object record {args.object} does not match the set's object")

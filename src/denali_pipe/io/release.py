@@ -9,19 +9,23 @@ import numpy as np
 
 from denali_pipe.geometry import N_BINS
 
+HISTOGRAM_DIR = "spad_histogram"
+FRAME_DIRS = ("tracking_rgb", "tracking_depth", "colocated_rgb", "colocated_depth")
+METADATA_FILE = "metadata.json"
+
 _NNN = re.compile(r"^(\d{3})\.npy$")
 
 
 def histogram_files(set_dir: Path) -> dict[int, Path]:
     """{gantry location: spad_histogram/NNN.npy} of a set folder, sorted by location."""
-    folder = Path(set_dir) / "spad_histogram"
+    folder = Path(set_dir) / HISTOGRAM_DIR
     if not folder.is_dir():
-        raise FileNotFoundError(f"{set_dir}: no spad_histogram/ folder")
+        raise FileNotFoundError(f"{set_dir}: no {HISTOGRAM_DIR}/ folder")
     files = {}
     for p in sorted(folder.iterdir()):
         m = _NNN.match(p.name)
         if m is None:
-            raise ValueError(f"{p}: unexpected file in spad_histogram/ (expected NNN.npy)")
+            raise ValueError(f"{p}: unexpected file in {HISTOGRAM_DIR}/ (expected NNN.npy)")
         files[int(m[1])] = p
     return files
 

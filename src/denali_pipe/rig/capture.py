@@ -1,4 +1,4 @@
-"""Synthesise one capture set in the release layout or as a raw pickle stream.
+"""Synthesise capture sets in the release layout or as raw pickle streams.
 
 Release layout (what the real rig's converter writes):
 
@@ -22,8 +22,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import pickle
-from pathlib import Path
 from contextlib import ExitStack
+from pathlib import Path
 from typing import Iterator
 
 import cv2
@@ -31,15 +31,16 @@ import numpy as np
 
 from denali_pipe import geometry as geo
 from denali_pipe.atomic import atomic_dir, atomic_file
-from denali_pipe.capture_sets import PICKLE_SUFFIX, CaptureSet
-from denali_pipe.objects import ObjectSpec
+from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet
+from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE
+from denali_pipe.objects import BACKGROUND_SIZE, ObjectSpec
 from denali_pipe.rig.frames import frame_tags, render_frame
 from denali_pipe.rig.histograms import Photometry, Scatterer, counts_from_transport, sample_counts, transport
 from denali_pipe.rig.scene import mount_scatterer, object_scatterer
 from denali_pipe.seeds import rng_for
 
 PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1]  # fast; ingest recompresses anyway
-MODALITIES = ("tracking_rgb", "tracking_depth", "colocated_rgb", "colocated_depth")
+TRUTH_FILE = "rig_truth.json"
 
 
 def _cameras(rig_cfg: dict) -> dict[str, geo.Camera]:
@@ -140,6 +141,14 @@ def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, ou
     computed once per resolution and shared by both lightings."""
     if len({(s.object, s.size) for s in sets}) != 1:
         raise ValueError(f"synth_sets takes sets of one object and size, got {[s.name for s in sets]}")
+    if len(outs) != len(sets):
+        raise ValueError(f"synth_sets: {len(sets)} sets but {len(outs)} outputs")
+    suffix = {"release": FOLDER_SUFFIX, "pickle": PICKLE_SUFFIX}[fmt]
+    for cs, out in zip(sets, outs):
+        if Path(out).name != cs.name + suffix:
+            raise ValueError(f"output {out} of capture set {cs.name}: a {fmt} output is named {cs.name}{suffix}")
+        if cs.is_background and cs.size != BACKGROUND_SIZE:
+            raise ValueError(f"capture set {cs.name}: background sets are captured at {BACKGROUND_SIZE} only")
     locations = geo.select_locations(config["rig"]["n_locations"])
     writer = {"release": _ReleaseWriter, "pickle": _PickleWriter}[fmt]
     with ExitStack() as stack:
@@ -161,20 +170,20 @@ class _ReleaseWriter:
 
     def __enter__(self):
         self.tmp = self._ctx.__enter__()
-        for sub in ("spad_histogram", *MODALITIES):
+        for sub in (HISTOGRAM_DIR, *FRAME_DIRS):
             (self.tmp / sub).mkdir()
         return self
 
     def add(self, rec: dict) -> None:
         name = f"{rec['iter']:03d}"
-        np.save(self.tmp / "spad_histogram" / f"{name}.npy", rec["histogram"])
+        np.save(self.tmp / HISTOGRAM_DIR / f"{name}.npy", rec["histogram"])
         for cam, (rgb, depth) in rec["frames"].items():
             cv2.imwrite(str(self.tmp / f"{cam}_rgb" / f"{name}.png"), rgb, PNG_PARAMS)
             cv2.imwrite(str(self.tmp / f"{cam}_depth" / f"{name}.png"), depth, PNG_PARAMS)
 
     def finish(self, truth: dict) -> None:
-        _write_json(self.tmp / "metadata.json", self.metadata)
-        _write_json(self.tmp / "rig_truth.json", truth)
+        _write_json(self.tmp / METADATA_FILE, self.metadata)
+        _write_json(self.tmp / TRUTH_FILE, truth)
 
     def __exit__(self, *exc):
         return self._ctx.__exit__(*exc)
@@ -183,15 +192,17 @@ class _ReleaseWriter:
 class _PickleWriter:
     """`<set>_short_NLOSdata.pkl`: the metadata record, then one record per
     location, as the capture script pickles them. The rig's truth goes beside
-    it as `<set>_rig_truth.json`."""
+    it as `<set>_rig_truth.json`; both are published together at exit."""
 
     def __init__(self, out: Path, metadata: dict):
-        self.out, self.metadata = out, metadata
-        self._ctx = atomic_file(out)
+        self.metadata = metadata
+        truth = out.with_name(f"{out.name.removesuffix(PICKLE_SUFFIX)}_{TRUTH_FILE}")
+        self._stack = ExitStack()
+        self._contexts = (atomic_file(truth), atomic_file(out))  # exited last-first: the stream, then its truth
 
     def __enter__(self):
-        self.tmp = self._ctx.__enter__()
-        self.f = open(self.tmp, "wb")
+        self.truth_tmp, tmp = (self._stack.enter_context(c) for c in self._contexts)
+        self.f = self._stack.enter_context(open(tmp, "wb"))
         pickle.dump(self.metadata, self.f, protocol=4)
         return self
 
@@ -203,12 +214,10 @@ class _PickleWriter:
         pickle.dump(record, self.f, protocol=4)
 
     def finish(self, truth: dict) -> None:
-        with atomic_file(self.out.with_name(self.out.name.removesuffix(PICKLE_SUFFIX) + "_rig_truth.json")) as tmp:
-            _write_json(tmp, truth)
+        _write_json(self.truth_tmp, truth)
 
     def __exit__(self, *exc):
-        self.f.close()
-        return self._ctx.__exit__(*exc)
+        return self._stack.__exit__(*exc)
 
 
 def _write_json(path: Path, obj: dict) -> None:
