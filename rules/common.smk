@@ -4,7 +4,9 @@ import shlex
 
 from snakemake.utils import min_version, validate
 
-from denali_pipe.capture_sets import FOLDER_SUFFIX, background_of, expected_sets
+from pathlib import Path
+
+from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name
 from denali_pipe.objects import BACKGROUNDS, load_catalogue
 
 min_version("9.0")
@@ -16,11 +18,19 @@ configfile: "config/config.yaml"
 validate(config, "../config/schema.yaml")
 
 CATALOGUE = load_catalogue(config["objects_sheet"])
-SETS = expected_sets(CATALOGUE, config)
 RAW = config["raw_dir"]
+SETS = expected_sets(CATALOGUE, config)
+if config["source"] != "synthetic":
+    # an existing capture tree holds what was captured: use the configured sets it has
+    suffix = FOLDER_SUFFIX if config["source"] == "release" else PICKLE_SUFFIX
+    SETS = [s for s in SETS if Path(f"{RAW}/{s.name}{suffix}").exists()]
+    if not SETS:
+        raise ValueError(f"source {config['source']}: no configured capture set found in {RAW}")
+SET_NAMES = [s.name for s in SETS]
 
 
 wildcard_constraints:
+    set=r"[A-Za-z0-9]+_(4inch|8inch)_(3x3|8x8)_(lighton|lightoff)",
     object=r"[A-Za-z0-9]+",
     size=r"4inch|8inch",
 
@@ -33,13 +43,32 @@ def raw_sets():
     return [raw_set(s.name) for s in SETS]
 
 
+def object_arg(name):
+    """`--object <sheet row as JSON>` for an object's jobs; nothing for a background.
+    Per-set jobs get their own row, not the sheet, so adding a row reruns nothing else."""
+    if name in BACKGROUNDS:
+        return ""
+    return f"--object {shlex.quote(json.dumps(CATALOGUE[name].to_dict(), sort_keys=True))}"
+
+
+# --- ingest ------------------------------------------------------------------
+
+
+def raw_source(wildcards):
+    if config["source"] == "pickle":
+        return f"{RAW}/{wildcards.set}{PICKLE_SUFFIX}"
+    return raw_set(wildcards.set)
+
+
+def ingest_object_arg(wildcards):
+    return object_arg(parse_set_name(wildcards.set).object)
+
+
 # --- rig ---------------------------------------------------------------------
 
 
 def rig_object_arg(wildcards):
-    if wildcards.object in BACKGROUNDS:
-        return ""
-    return f"--object {shlex.quote(json.dumps(CATALOGUE[wildcards.object].to_dict(), sort_keys=True))}"
+    return object_arg(wildcards.object)
 
 
 def rig_mesh_files(wildcards):

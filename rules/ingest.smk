@@ -1,0 +1,46 @@
+# Raw-capture ingestion: one job per capture set into a Zarr store and its
+# capture index, then the aggregates over all sets.
+
+
+rule ingest:
+    input:
+        raw_source,
+    output:
+        store=directory("results/store/{set}.zarr"),
+        index="results/index/{set}.parquet",
+    params:
+        object=ingest_object_arg,
+    log:
+        "logs/ingest/{set}.log",
+    benchmark:
+        "benchmarks/ingest/{set}.tsv"
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali ingest {input} {params.object} --store {output.store} --index {output.index} > {log} 2>&1"
+
+
+rule index:
+    input:
+        expand("results/index/{set}.parquet", set=SET_NAMES),
+    output:
+        "results/index/captures.parquet",
+    log:
+        "logs/index.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali index {input} --out {output} > {log} 2>&1"
+
+
+rule table4:
+    input:
+        expand("results/store/{set}.zarr", set=SET_NAMES),
+    output:
+        "results/table4.csv",
+    log:
+        "logs/table4.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali table4 {input} --out {output} > {log} 2>&1"

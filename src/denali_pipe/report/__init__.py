@@ -1,0 +1,1 @@
+"""Tables and figures of the paper, built from the pipeline's outputs."""
