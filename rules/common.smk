@@ -39,8 +39,8 @@ def raw_set(name):
     return f"{RAW}/{name}{FOLDER_SUFFIX}"
 
 
-def raw_sets():
-    return [raw_set(s.name) for s in SETS]
+def store(name):
+    return f"results/store/{name}.zarr"
 
 
 def object_arg(name):
@@ -86,4 +86,4 @@ def example_pairs():
     preference = lambda s: (s.light != "lighton", s.size != "8inch", CATALOGUE[s.object].type != "shape", s.name)
     for s in sorted(objects, key=preference):
         picks.setdefault(s.resolution, s)
-    return [(raw_set(s.name), raw_set(background_of(s).name)) for s in picks.values()]
+    return [(store(s.name), store(background_of(s).name)) for s in picks.values()]

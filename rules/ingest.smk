@@ -6,7 +6,7 @@ rule ingest:
     input:
         raw_source,
     output:
-        store=directory("results/store/{set}.zarr"),
+        store=directory(store("{set}")),
         index="results/index/{set}.parquet",
     params:
         object=ingest_object_arg,
@@ -35,7 +35,7 @@ rule index:
 
 rule table4:
     input:
-        expand("results/store/{set}.zarr", set=SET_NAMES),
+        [store(name) for name in SET_NAMES],
     output:
         "results/table4.csv",
     log:

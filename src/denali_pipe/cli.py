@@ -111,8 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_table4)
 
     s = sub.add_parser("rig-examples", help="plot example histograms with the three-bounce bump marked")
-    s.add_argument("--sets", nargs="+", required=True, help="object capture-set folders (release layout)")
-    s.add_argument("--backgrounds", nargs="+", required=True, help="the matching NOOBJECT set folders, in the same order")
+    s.add_argument("--sets", nargs="+", required=True, help="object capture-set stores (<set>.zarr)")
+    s.add_argument("--backgrounds", nargs="+", required=True, help="the matching NOOBJECT set stores, in the same order")
     s.add_argument("--out", required=True, help="PNG path; the plotted data goes beside it as CSV")
     s.set_defaults(func=cmd_rig_examples)
     return p

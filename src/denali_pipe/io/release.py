@@ -5,10 +5,6 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-import numpy as np
-
-from denali_pipe.geometry import N_BINS
-
 HISTOGRAM_DIR = "spad_histogram"
 FRAME_DIRS = ("tracking_rgb", "tracking_depth", "colocated_rgb", "colocated_depth")
 METADATA_FILE = "metadata.json"
@@ -28,16 +24,3 @@ def histogram_files(set_dir: Path) -> dict[int, Path]:
             raise ValueError(f"{p}: unexpected file in {HISTOGRAM_DIR}/ (expected NNN.npy)")
         files[int(m[1])] = p
     return files
-
-
-def load_histogram(path: Path, n_zones: int) -> np.ndarray:
-    """One location's histograms (repeats, n, n, N_BINS) int32, checked."""
-    try:
-        h = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as e:
-        raise ValueError(f"{path}: unreadable .npy ({e})") from None
-    if h.ndim != 4 or h.shape[1:] != (n_zones, n_zones, N_BINS):
-        raise ValueError(f"{path}: expected shape (repeats, {n_zones}, {n_zones}, {N_BINS}), found {h.shape}")
-    if not np.issubdtype(h.dtype, np.integer):
-        raise ValueError(f"{path}: expected integer counts, found dtype {h.dtype}")
-    return h

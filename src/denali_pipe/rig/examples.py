@@ -20,8 +20,7 @@ import pandas as pd  # noqa: E402
 
 from denali_pipe import geometry as geo  # noqa: E402
 from denali_pipe.atomic import atomic_file  # noqa: E402
-from denali_pipe.capture_sets import parse_set_name  # noqa: E402
-from denali_pipe.io.release import histogram_files, load_histogram  # noqa: E402
+from denali_pipe.io.store import open_set  # noqa: E402
 from denali_pipe.objects import BOTTOM_Y, SIZES  # noqa: E402
 from denali_pipe.rig.histograms import wall_samples  # noqa: E402
 
@@ -56,21 +55,21 @@ def bump_window(resolution: str, size: str, location: int, zone: tuple[int, int]
 
 
 def rig_examples(pairs: list[tuple[Path, Path]], out_png: Path) -> None:
-    """Plot each (object set folder, background set folder) pair; write PNG + CSV."""
+    """Plot each (object set store, NOOBJECT set store) pair; write PNG + CSV."""
     rows = []
     fig, axes = plt.subplots(len(pairs), 3, figsize=(13, 3.4 * len(pairs)), squeeze=False)
-    for ax_row, (obj_dir, bg_dir) in zip(axes, pairs):
-        cs = parse_set_name(obj_dir.name)
-        obj_files, bg_files = histogram_files(obj_dir), histogram_files(bg_dir)
-        locations = sorted(set(obj_files) & set(bg_files))
+    for ax_row, (obj_path, bg_path) in zip(axes, pairs):
+        obj_store, bg_store = open_set(obj_path), open_set(bg_path)
+        cs = obj_store.capture_set
+        locations = sorted(set(obj_store.locations) & set(bg_store.locations))
         if not locations:
-            raise ValueError(f"{obj_dir} and {bg_dir} share no gantry location")
+            raise ValueError(f"{obj_path} and {bg_path} share no gantry location")
         dist = geo.wall_distance(np.array([geo.object_pose(k).t for k in locations]))
         picks = [locations[i] for i in (int(dist.argmin()), int(np.argsort(dist)[len(dist) // 2]), int(dist.argmax()))]
         for ax, k in zip(ax_row, picks):
             zone = nearest_zone(cs.resolution, k)
-            obj = load_histogram(obj_files[k], cs.n_zones).mean(0)[zone]
-            bg = load_histogram(bg_files[k], cs.n_zones).mean(0)[zone]
+            obj = obj_store.histogram(obj_store.index_of(k)).mean(0)[zone]
+            bg = bg_store.histogram(bg_store.index_of(k)).mean(0)[zone]
             lo, hi = bump_window(cs.resolution, cs.size, k, zone)
             bins = np.arange(geo.N_BINS)
             diff = obj - bg
