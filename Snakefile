@@ -5,6 +5,7 @@
 include: "rules/common.smk"
 include: "rules/rig.smk"
 include: "rules/ingest.smk"
+include: "rules/poses.smk"
 
 
 rule all:
@@ -12,4 +13,6 @@ rule all:
         "results/rig_examples.png",
         "results/index/captures.parquet",
         "results/table4.csv",
+        "results/table6.csv",
+        "results/fig12.png",
     default_target: True

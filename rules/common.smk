@@ -87,3 +87,14 @@ def example_pairs():
     for s in sorted(objects, key=preference):
         picks.setdefault(s.resolution, s)
     return [(store(s.name), store(background_of(s).name)) for s in picks.values()]
+
+
+# --- poses -------------------------------------------------------------------
+
+
+def figure_set():
+    """The light-on set whose first tracking frame Fig 12 shows."""
+    lit = [s.name for s in SETS if s.light_on]
+    if not lit:
+        raise ValueError("the pose stage needs at least one light-on capture set (config `lightings`)")
+    return lit[0]

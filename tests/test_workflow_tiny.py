@@ -78,7 +78,7 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     preset.write_text(preset.read_text().replace("generalization1white]", "generalization1white, newplus]"))
     out = snakemake(wd, "-n", *TINY).stdout
     jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
-    assert jobs == {"rig": 2, "ingest": 8, "index": 1, "table4": 1, "all": 1, "total": 13}
+    assert jobs == {"rig": 2, "ingest": 8, "poses": 8, "index": 1, "table4": 1, "calibrate": 1, "all": 1, "total": 22}
     assert sorted(re.findall(r"wildcards: object=(\w+), size=(\w+)", out)) == [("newplus", "4inch"), ("newplus", "8inch")]
     assert {m for m in re.findall(r"wildcards: set=(\w+)", out)} == {
         f"newplus_{size}_{res}_{light}" for size in ("4inch", "8inch") for res in ("3x3", "8x8") for light in ("lighton", "lightoff")
@@ -126,3 +126,20 @@ def test_bad_set_fails_alone_with_keep_going(tiny_run, tmp_path):
     assert not any(p.name.startswith(".") for p in (wd / "results/store").iterdir())  # nothing half-written
     log = (wd / f"logs/ingest/{bad}.log").read_text()
     assert str(npy.relative_to(wd)) in log and bad in log
+
+
+def test_poses_match_the_rig_truth(tiny_run):
+    truth = json.loads((tiny_run / "data/raw/circle_8inch_3x3_lighton_NLOSdata/rig_truth.json").read_text())
+    t6 = pd.read_csv(tiny_run / "results/table6.csv").set_index("tag_id")
+    for tag, pose in truth["static_tags"].items():
+        est = t6.loc[int(tag), ["x_mean_cm", "y_mean_cm", "z_mean_cm"]].to_numpy(float) / 100
+        assert np.linalg.norm(est - np.array(pose["t"])) < 0.002, f"tag {tag}"
+    pos = pd.read_parquet(tiny_run / "results/calibration/tag1_positions.parquet").set_index("location")
+    for k, rec in truth["locations"].items():
+        err = pos.loc[int(k), ["x", "y", "z"]].to_numpy(float) - np.array(rec["tag1"]["t"])
+        assert np.linalg.norm(err) < 0.003, f"location {k}: {err}"
+    scene = json.loads((tiny_run / "results/calibration/scene.json").read_text())
+    assert set(map(int, scene["locations"])) == set(map(int, truth["locations"]))
+    det = pd.read_csv(tiny_run / "results/calibration/detections.csv")
+    assert set(det.light) == {"lighton", "lightoff"}
+    assert (tiny_run / "results/fig12.png").stat().st_size > 10_000

@@ -73,6 +73,44 @@ def cmd_table4(args: argparse.Namespace) -> None:
     log.info("wrote %s", args.out)
 
 
+def cmd_poses(args: argparse.Namespace) -> None:
+    from denali_pipe.atomic import atomic_file
+    from denali_pipe.poses.estimate import detect_set
+
+    table = detect_set(Path(args.store))
+    with atomic_file(Path(args.out)) as tmp:
+        table.to_parquet(tmp, index=False)
+    log.info("wrote %s (%d tag rows, %d estimates)", args.out, len(table), int((table["status"] == "ok").sum()))
+
+
+def cmd_calibrate(args: argparse.Namespace) -> None:
+    import json
+
+    import pandas as pd
+
+    from denali_pipe.atomic import atomic_file
+    from denali_pipe.poses.calibrate import calibrate, detection_rates, pool
+    from denali_pipe.report.fig12 import write_fig12_from_store
+    from denali_pipe.report.table6 import write_table6
+
+    tables = [pd.read_parquet(p) for p in args.poses]
+    lit = [t for t in tables if (t["light"] == "lighton").all()]
+    if not lit:
+        raise ValueError(f"calibrate: none of the {len(tables)} pose tables is from a light-on set")
+    cal = calibrate(lit)  # the scene is estimated from light-on frames only
+    outdir = Path(args.outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    with atomic_file(outdir / "tag1_positions.parquet") as tmp:
+        cal.object_positions.to_parquet(tmp, index=False)
+    with atomic_file(outdir / "scene.json") as tmp:
+        tmp.write_text(json.dumps(cal.scene, indent=1, sort_keys=True) + "\n")
+    with atomic_file(outdir / "detections.csv") as tmp:
+        detection_rates(pool(tables)).to_csv(tmp, index=False)  # every lighting
+    write_table6(cal.estimates, Path(args.table6))
+    write_fig12_from_store(Path(args.figure_store), cal.estimates, cal.filtered, Path(args.fig12))
+    log.info("wrote %s, %s, %s", outdir, args.table6, args.fig12)
+
+
 def cmd_rig_examples(args: argparse.Namespace) -> None:
     from denali_pipe.rig.examples import rig_examples
 
@@ -109,6 +147,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("stores", nargs="+", help="capture-set Zarr stores")
     s.add_argument("--out", required=True, help="output table4.csv")
     s.set_defaults(func=cmd_table4)
+
+    s = sub.add_parser("poses", help="detect AprilTags and estimate their poses in one capture set's tracking frames")
+    s.add_argument("store", help="the set's <set>.zarr")
+    s.add_argument("--out", required=True, help="output <set>.parquet: one row per (frame, tag)")
+    s.set_defaults(func=cmd_poses)
+
+    s = sub.add_parser("calibrate", help="world frame, filtered tag positions, scene.json, Table 6, Fig 12")
+    s.add_argument("poses", nargs="+", help="per-set pose tables (light-on ones calibrate; all count for detection rates)")
+    s.add_argument("--figure-store", required=True, help="the light-on store whose first frame Fig 12 shows")
+    s.add_argument("--outdir", required=True, help="results/calibration: tag1_positions.parquet, scene.json, detections.csv")
+    s.add_argument("--table6", required=True, help="output table6.csv")
+    s.add_argument("--fig12", required=True, help="output fig12.png (its data beside it as CSV)")
+    s.set_defaults(func=cmd_calibrate)
 
     s = sub.add_parser("rig-examples", help="plot example histograms with the three-bounce bump marked")
     s.add_argument("--sets", nargs="+", required=True, help="object capture-set stores (<set>.zarr)")

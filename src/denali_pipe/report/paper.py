@@ -14,17 +14,19 @@ TABLE4_GB = {
 }
 
 # Table 6: AprilTag position estimates of the static tags in the world frame
-# (origin tag 14): tag id -> component, number of estimates after |z| > 2
-# rejection, and mean / standard deviation per axis in cm.
-TABLE6 = {
-    0: {"component": "lidar", "n_estimates": 11340, "x_mean_cm": 47.03, "x_std_cm": 0.02, "y_mean_cm": 25.42, "y_std_cm": 0.04, "z_mean_cm": 38.87, "z_std_cm": 0.05},
-    5: {"component": "relay_wall", "n_estimates": 11282, "x_mean_cm": 43.14, "x_std_cm": 0.06, "y_mean_cm": 80.39, "y_std_cm": 0.19, "z_mean_cm": 41.48, "z_std_cm": 0.14},
-    6: {"component": "relay_wall", "n_estimates": 11417, "x_mean_cm": 86.07, "x_std_cm": 0.02, "y_mean_cm": 82.72, "y_std_cm": 0.18, "z_mean_cm": 12.79, "z_std_cm": 0.17},
-    7: {"component": "relay_wall", "n_estimates": 11237, "x_mean_cm": 129.44, "x_std_cm": 0.12, "y_mean_cm": 84.21, "y_std_cm": 0.36, "z_mean_cm": 40.13, "z_std_cm": 0.17},
-    10: {"component": "table", "n_estimates": 11307, "x_mean_cm": 0.07, "x_std_cm": 0.09, "y_mean_cm": 76.28, "y_std_cm": 0.13, "z_mean_cm": -0.54, "z_std_cm": 0.13},
-    11: {"component": "table", "n_estimates": 9531, "x_mean_cm": 145.92, "x_std_cm": 0.17, "y_mean_cm": 76.85, "y_std_cm": 0.26, "z_mean_cm": 1.65, "z_std_cm": 0.26},
-    12: {"component": "table", "n_estimates": 11326, "x_mean_cm": -0.50, "x_std_cm": 0.11, "y_mean_cm": 38.75, "y_std_cm": 0.13, "z_mean_cm": -0.86, "z_std_cm": 0.17},
-    13: {"component": "table", "n_estimates": 10772, "x_mean_cm": 147.23, "x_std_cm": 0.07, "y_mean_cm": 39.40, "y_std_cm": 0.08, "z_mean_cm": 1.98, "z_std_cm": 0.11},
-    14: {"component": "table", "n_estimates": 11492, "x_mean_cm": 0.01, "x_std_cm": 0.16, "y_mean_cm": -0.00, "y_std_cm": 0.08, "z_mean_cm": 0.01, "z_std_cm": 0.25},
-    15: {"component": "table", "n_estimates": 11331, "x_mean_cm": 148.80, "x_std_cm": 0.11, "y_mean_cm": 1.86, "y_std_cm": 0.07, "z_mean_cm": 1.54, "z_std_cm": 0.17},
+# (origin tag 14): per tag id its component, the number of estimates kept
+# after |z| > 2 rejection, and the mean and standard deviation per axis in cm.
+TABLE6_COLUMNS = ("component", "n_estimates", "x_mean_cm", "x_std_cm", "y_mean_cm", "y_std_cm", "z_mean_cm", "z_std_cm")
+_TABLE6_ROWS = {
+    0: ("lidar", 11340, 47.03, 0.02, 25.42, 0.04, 38.87, 0.05),
+    5: ("relay_wall", 11282, 43.14, 0.06, 80.39, 0.19, 41.48, 0.14),
+    6: ("relay_wall", 11417, 86.07, 0.02, 82.72, 0.18, 12.79, 0.17),
+    7: ("relay_wall", 11237, 129.44, 0.12, 84.21, 0.36, 40.13, 0.17),
+    10: ("table", 11307, 0.07, 0.09, 76.28, 0.13, -0.54, 0.13),
+    11: ("table", 9531, 145.92, 0.17, 76.85, 0.26, 1.65, 0.26),
+    12: ("table", 11326, -0.50, 0.11, 38.75, 0.13, -0.86, 0.17),
+    13: ("table", 10772, 147.23, 0.07, 39.40, 0.08, 1.98, 0.11),
+    14: ("table", 11492, 0.01, 0.16, -0.00, 0.08, 0.01, 0.25),
+    15: ("table", 11331, 148.80, 0.11, 1.86, 0.07, 1.54, 0.17),
 }
+TABLE6 = {tag: dict(zip(TABLE6_COLUMNS, row)) for tag, row in _TABLE6_ROWS.items()}
