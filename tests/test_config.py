@@ -90,7 +90,7 @@ def test_defaults_are_not_shared_between_validations():
     a["rig"]["frames"]["tracking_scale"] = 0.9
     b: dict = {}
     validate(b, SCHEMA)
-    assert b["rig"]["frames"]["tracking_scale"] == 0.35
+    assert b["rig"]["frames"]["tracking_scale"] == 0.5
 
 
 # --- invalid configs ---------------------------------------------------------------------

@@ -41,7 +41,7 @@ def _tiny_config() -> dict:
     cfg = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
     tiny = yaml.safe_load((REPO / "config" / "presets" / "tiny.yaml").read_text())
     cfg["rig"].update({k: v for k, v in tiny["rig"].items() if k != "frames"})
-    cfg["rig"]["frames"] = {**cfg["rig"]["frames"], **tiny["rig"]["frames"]}
+    cfg["rig"]["frames"] = {**cfg["rig"]["frames"], **tiny["rig"].get("frames", {})}
     cfg["rig"]["repeats"] = 1
     return cfg
 
