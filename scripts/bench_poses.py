@@ -46,7 +46,7 @@ VARIANTS = {
 
 
 def intrinsics(cam: geo.Camera) -> Intrinsics:
-    return Intrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+    return cam.intrinsics
 
 
 def visible(cam: geo.Camera, tags: dict[int, geo.Pose], margin: float = 3.0) -> set[int]:

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from denali_pipe import geometry as geo
-from denali_pipe.poses import Intrinsics, estimate_frames, filter_estimates
+from denali_pipe.poses import estimate_frames, filter_estimates
 from denali_pipe.report.fig12 import CSV_COLUMNS, annotate_frame, write_fig12
 from denali_pipe.rig.frames import frame_tags, render_frame
 
@@ -17,7 +17,7 @@ from denali_pipe.rig.frames import frame_tags, render_frame
 @pytest.fixture(scope="module")
 def data():
     cam = geo.TRACKING_CAMERA.scaled(0.35)
-    intr = Intrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+    intr = cam.intrinsics
     frames = [(k, render_frame(cam, frame_tags(k, "tracking"), True, np.random.default_rng(k))[0]) for k in (0, 45, 99)]
     est = estimate_frames(frames, intr, set_name="A_8inch_3x3_lighton", light="lighton")
     return frames, est, filter_estimates(est)

@@ -213,7 +213,7 @@ def test_occluded_and_blank_frames(config):
     """A covered tag is `missing`; a frame with one table tag left has no
     camera (`no_camera`); a black frame has nothing; none of it crashes."""
     cam = geo.TRACKING_CAMERA.scaled(0.35)
-    intr = Intrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+    intr = cam.intrinsics
     tags = frame_tags(0, "tracking")
     bgr, _ = render_frame(cam, tags, True, np.random.default_rng(5))
 

@@ -31,7 +31,7 @@ def _corners(cam: geo.Camera, tags: dict[int, geo.Pose]) -> dict[int, np.ndarray
 
 
 def _intr(cam: geo.Camera) -> Intrinsics:
-    return Intrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+    return cam.intrinsics
 
 
 def test_intrinsics_from_metadata_and_fallback():

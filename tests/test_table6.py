@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from denali_pipe import geometry as geo
-from denali_pipe.poses import Intrinsics, estimate_frames, filter_estimates
+from denali_pipe.poses import estimate_frames, filter_estimates
 from denali_pipe.report.paper import TABLE6
 from denali_pipe.report.table6 import TAG_IDS, table6, write_table6
 from denali_pipe.rig.frames import frame_tags, render_frame
@@ -24,7 +24,7 @@ PAPER_COLUMNS = ["tag_id", "component", "n_estimates", "x_mean_cm", "x_std_cm", 
 def estimates() -> pd.DataFrame:
     """Pose rows of six rendered frames (third-scale tracking camera)."""
     cam = geo.TRACKING_CAMERA.scaled(0.35)
-    intr = Intrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+    intr = cam.intrinsics
     frames = [(k, render_frame(cam, frame_tags(k, "tracking"), True, np.random.default_rng(k))[0]) for k in (0, 20, 40, 60, 80, 99)]
     return estimate_frames(frames, intr, set_name="A_8inch_3x3_lighton", light="lighton")
 

@@ -20,6 +20,7 @@ Conventions
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -161,44 +162,62 @@ def tag_corners_local(size: float = TAG_SIZE) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Camera:
-    """Pinhole camera. Intrinsics in pixels; R_wc (3, 3), t_wc (3,) map world
-    points to the OpenCV camera frame (x right, y down, z forward)."""
+class Intrinsics:
+    """Pinhole intrinsics of one image size, in pixels (pixel centres at integers)."""
 
-    name: str
     width: int
     height: int
     fx: float
     fy: float
     cx: float
     cy: float
-    R_wc: np.ndarray = field(repr=False)
-    t_wc: np.ndarray = field(repr=False)
 
     @property
     def K(self) -> np.ndarray:
         return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1.0]])
+
+    def scaled_to(self, width: int, height: int) -> "Intrinsics":
+        """The same lens on the image resampled to `width` x `height` (a pixel
+        centre at x maps to (x + 0.5) * s - 0.5 with s = new / old size)."""
+        if (width, height) == (self.width, self.height):
+            return self
+        sx, sy = width / self.width, height / self.height
+        return Intrinsics(int(width), int(height), self.fx * sx, self.fy * sy, (self.cx + 0.5) * sx - 0.5, (self.cy + 0.5) * sy - 0.5)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Intrinsics":
+        return cls(int(d["width"]), int(d["height"]), *(float(d[k]) for k in ("fx", "fy", "cx", "cy")))
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole camera: intrinsics plus R_wc (3, 3), t_wc (3,) mapping world
+    points to the OpenCV camera frame (x right, y down, z forward)."""
+
+    name: str
+    intrinsics: Intrinsics
+    R_wc: np.ndarray = field(repr=False)
+    t_wc: np.ndarray = field(repr=False)
+
+    width = property(lambda self: self.intrinsics.width)
+    height = property(lambda self: self.intrinsics.height)
+    fx = property(lambda self: self.intrinsics.fx)
+    fy = property(lambda self: self.intrinsics.fy)
+    cx = property(lambda self: self.intrinsics.cx)
+    cy = property(lambda self: self.intrinsics.cy)
+    K = property(lambda self: self.intrinsics.K)
 
     @property
     def position(self) -> np.ndarray:
         return -self.R_wc.T @ self.t_wc
 
     def scaled(self, scale: float) -> "Camera":
-        """The same camera with the image resampled by `scale` (pixel-centre
-        convention: a pixel centre at x maps to (x + 0.5) * scale - 0.5)."""
-        if scale == 1.0:
-            return self
-        return Camera(
-            self.name,
-            int(round(self.width * scale)),
-            int(round(self.height * scale)),
-            self.fx * scale,
-            self.fy * scale,
-            (self.cx + 0.5) * scale - 0.5,
-            (self.cy + 0.5) * scale - 0.5,
-            self.R_wc,
-            self.t_wc,
-        )
+        """The same camera with the image resampled by `scale`."""
+        size = (int(round(self.width * scale)), int(round(self.height * scale)))
+        return dataclasses.replace(self, intrinsics=self.intrinsics.scaled_to(*size))
 
     def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World points (..., 3) -> pixel coordinates (..., 2) and depth (...,) in m."""
@@ -236,11 +255,11 @@ _COLOCATED_FWD = _v(0.451, 0.889, -0.072)
 # (0.006, 0.634, -0.774): the frame then just holds tag 5's printed margin at
 # the top and tag 14's at the bottom, as the real capture's tag check needs.
 TRACKING_CAMERA = Camera(
-    "tracking", 1280, 720, 923.57, 923.94, 641.69, 365.96,
+    "tracking", Intrinsics(1280, 720, 923.57, 923.94, 641.69, 365.96),
     *look_at(_TRACKING_POS, (0.006, 0.6236, -0.7817)),
 )
 COLOCATED_CAMERA = Camera(
-    "colocated", 848, 480, 605.79, 605.37, 426.69, 247.06,
+    "colocated", Intrinsics(848, 480, 605.79, 605.37, 426.69, 247.06),
     *look_at(_COLOCATED_POS, _COLOCATED_FWD),
 )
 

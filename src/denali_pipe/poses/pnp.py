@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from denali_pipe import geometry as geo
+from denali_pipe.geometry import Intrinsics
 
 _NO_DIST = np.zeros(5)
 
@@ -21,45 +22,11 @@ _NO_DIST = np.zeros(5)
 # --- intrinsics ---------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class Intrinsics:
-    """Pinhole intrinsics of a frame size, in pixels (pixel centres at integers)."""
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-    @property
-    def K(self) -> np.ndarray:
-        return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1.0]])
-
-    def scaled_to(self, width: int, height: int) -> "Intrinsics":
-        """The same lens on a resampled image of `width` x `height` (the
-        pixel-centre convention of `geometry.Camera.scaled`)."""
-        if (width, height) == (self.width, self.height):
-            return self
-        sx, sy = width / self.width, height / self.height
-        return Intrinsics(int(width), int(height), self.fx * sx, self.fy * sy, (self.cx + 0.5) * sx - 0.5, (self.cy + 0.5) * sy - 0.5)
-
-    def to_dict(self) -> dict:
-        return {"width": self.width, "height": self.height, "fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "Intrinsics":
-        return cls(int(d["width"]), int(d["height"]), *(float(d[k]) for k in ("fx", "fy", "cx", "cy")))
-
-
 # The one fallback for frames whose metadata carries no tracking-camera record
 # (the public release): the real tracking RealSense's calibration, 1280x720,
 # fx 923.57 fy 923.94 cx 641.69 cy 365.96 (REFERENCE Part 1 section 1), which
 # geometry.TRACKING_CAMERA carries; it is scaled to the frame size.
-REAL_TRACKING_INTRINSICS = Intrinsics(
-    geo.TRACKING_CAMERA.width, geo.TRACKING_CAMERA.height,
-    geo.TRACKING_CAMERA.fx, geo.TRACKING_CAMERA.fy, geo.TRACKING_CAMERA.cx, geo.TRACKING_CAMERA.cy,
-)  # fmt: skip
+REAL_TRACKING_INTRINSICS = geo.TRACKING_CAMERA.intrinsics
 METADATA_KEY = "tracking_camera"
 
 

@@ -51,12 +51,8 @@ def _cameras(rig_cfg: dict) -> dict[str, geo.Camera]:
     }
 
 
-def _intrinsics(cam: geo.Camera) -> dict:
-    return {"width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy}
-
-
 def _camera_record(cam: geo.Camera) -> dict:
-    return {**_intrinsics(cam), "R_world_to_camera": cam.R_wc.tolist(), "t_world_to_camera": cam.t_wc.tolist()}
+    return {**cam.intrinsics.to_dict(), "R_world_to_camera": cam.R_wc.tolist(), "t_world_to_camera": cam.t_wc.tolist()}
 
 
 def metadata_record(cs: CaptureSet, locations: np.ndarray, rig_cfg: dict) -> dict:
@@ -79,8 +75,8 @@ def metadata_record(cs: CaptureSet, locations: np.ndarray, rig_cfg: dict) -> dic
         "spad_map": fw.spad_map,
         "period_ms": fw.period_ms,
         "kilo_iterations": fw.kilo_iterations,
-        "tracking_camera": _intrinsics(cams["tracking"]),
-        "colocated_camera": _intrinsics(cams["colocated"]),
+        "tracking_camera": cams["tracking"].intrinsics.to_dict(),
+        "colocated_camera": cams["colocated"].intrinsics.to_dict(),
         "source": "denali-pipe synthetic rig",
     }
 

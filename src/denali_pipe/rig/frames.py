@@ -141,7 +141,7 @@ def _irradiance(points: np.ndarray, normal: np.ndarray, light_on: bool) -> np.nd
 def _camera_key(camera: Camera) -> tuple:
     # Camera holds arrays, so it is not hashable: key on its defining numbers.
     return (
-        camera.name, camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy,
+        camera.name, camera.intrinsics,
         np.asarray(camera.R_wc, float).tobytes(), np.asarray(camera.t_wc, float).tobytes(),
     )
 
