@@ -1,0 +1,177 @@
+"""Per-set preprocessing: temporal alignment, background subtraction, cropping.
+
+Histograms are `(location, repeat, zone_row, zone_col, bin)` photon counts;
+each repeat stays a sample (as in the paper). Steps, per capture set:
+
+1. Temporal alignment: the direct wall return is the strongest, sharpest
+   feature of every histogram and does not depend on the hidden object, so
+   each histogram is shifted by whole bins until its direct return lines up
+   with the background's at the same location. Sub-bin shifts are not
+   applied: interpolation would blur the pulse more than the jitter it removes.
+2. Background subtraction: minus the mean over repeats of the `NOOBJECT` set
+   captured at the same location, resolution and lighting. What remains is
+   the object's three-bounce return plus noise (negative values kept).
+3. Cropping: bins before `crop_start` hold the direct return (and its pulse
+   tail), which subtraction leaves as noise `sqrt(2 * counts)` thousands of
+   counts tall; they are dropped. `crop_start` is derived from the background
+   sets of one resolution (`crop_window`), so every set of that resolution,
+   both lightings, shares one window.
+
+Normalisation (raw counts, or log1p + z-score) needs statistics over a
+training split, so it lives with training (`normalise`), not here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# After subtraction the direct return cancels in expectation and leaves its
+# shot noise, whose variance is its counts. It has ended where its excess over
+# the flat floor adds less than this fraction to the floor's counts, i.e. the
+# noise there is within 5 % of the floor's (3x3 demo: 10 % of ~1,300 counts,
+# reached ~14 bins after a ~6,000-count peak).
+DIRECT_END_FRACTION = 0.1
+# Bins before the direct return used to estimate the flat floor.
+FLOOR_BINS = 16
+# A zone's direct return counts only if its mean peak stands this many noise sigmas above the floor.
+SIGNIFICANCE = 5.0
+# Whole-bin alignment shifts searched; reaching this means the capture, not the clock, is wrong.
+MAX_SHIFT_BINS = 8
+
+
+def shift_bins(hist: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """Shift each histogram along its last axis by whole bins (positive = later),
+    filling the vacated bins with the nearest edge value (the flat floor).
+
+    hist: (L, R, n, n, B); shifts: (L, R) int. Returns a new array of hist's dtype.
+    """
+    out = np.array(hist, copy=True)
+    for (l, r), d in np.ndenumerate(shifts):
+        if d:
+            out[l, r] = np.roll(hist[l, r], d, axis=-1)
+            if d > 0:
+                out[l, r, ..., :d] = hist[l, r, ..., :1]
+            else:
+                out[l, r, ..., d:] = hist[l, r, ..., -1:]
+    return out
+
+
+def alignment_shifts(hist: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """Whole-bin shifts (L, R) that best align each histogram with the
+    background at the same location (mean over its repeats).
+
+    A matched filter: the shift maximises the correlation of the shifted
+    histogram, all zones together, with the background's floor-free profile,
+    which is the direct return. Zones peak at different bins (their wall
+    patches lie at different distances), so one shift per histogram fitted
+    on every zone at once is far steadier than any per-zone peak, and still
+    works on 8x8 zones that catch a few direct photons each.
+
+    Raises ValueError when the best shift reaches MAX_SHIFT_BINS."""
+    template = background.mean(axis=1, dtype=np.float64)  # (L, n, n, B)
+    template = template - template[..., :FLOOR_BINS].mean(axis=-1, keepdims=True)
+    h = hist.astype(np.float64)
+    candidates = np.arange(-MAX_SHIFT_BINS, MAX_SHIFT_BINS + 1)
+    scores = np.stack([np.einsum("lrijb,lijb->lr", np.roll(h, d, axis=-1), template) for d in candidates])
+    shifts = candidates[scores.argmax(axis=0)]
+    if np.abs(shifts).max(initial=0) >= MAX_SHIFT_BINS:
+        l, r = np.unravel_index(np.abs(shifts).argmax(), shifts.shape)
+        raise ValueError(f"direct return of location index {l} repeat {r} is at least {MAX_SHIFT_BINS} bins off the background's")
+    return shifts
+
+
+def subtract_background(hist: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """hist (L, R, n, n, B) minus the mean over repeats of background
+    (L, Rb, n, n, B) at the same locations; float32, negatives kept."""
+    if hist.shape[0] != background.shape[0] or hist.shape[2:] != background.shape[2:]:
+        raise ValueError(f"histograms {hist.shape} and background {background.shape} do not match in locations, zones or bins")
+    return (hist.astype(np.float32) - background.mean(axis=1, dtype=np.float64)[:, None].astype(np.float32)).astype(np.float32)
+
+
+def direct_end(profile: np.ndarray, n_averaged: int, fraction: float = DIRECT_END_FRACTION) -> np.ndarray:
+    """First bin after the direct-return peak where the excess over the floor
+    falls below `fraction` of the floor (at least `fraction` of one count),
+    per zone; -1 for zones whose peak does not stand SIGNIFICANCE noise
+    sigmas above the floor (8x8 zones catch ~1 direct photon per bin: their
+    'end' would be noise).
+
+    profile: (Z, B) mean counts over `n_averaged` histograms. Returns (Z,) int bins."""
+    floor = profile[:, :FLOOR_BINS].mean(axis=1)
+    excess = profile - floor[:, None]
+    peak = excess.argmax(axis=1)
+    sigma = np.sqrt(np.maximum(floor, 1.0) / n_averaged)  # Poisson noise of the mean profile
+    ends = []
+    for z, p in enumerate(peak):
+        if excess[z, p] < SIGNIFICANCE * sigma[z]:
+            ends.append(-1)
+            continue
+        below = np.flatnonzero(excess[z, p:] < fraction * max(floor[z], 1.0))
+        if not len(below):
+            raise ValueError(f"zone {z}: the direct return never falls within {fraction:g} x the floor in the histogram")
+        ends.append(p + below[0])
+    return np.array(ends)
+
+
+def crop_window(backgrounds: list[np.ndarray], fraction: float = DIRECT_END_FRACTION) -> int:
+    """The first bin kept: the latest direct-return end over every significant
+    zone of the given background sets (each (L, R, n, n, B), one resolution)."""
+    if not backgrounds:
+        raise ValueError("crop_window needs at least one background set")
+    ends = np.concatenate([direct_end(b.mean(axis=(0, 1), dtype=np.float64).reshape(-1, b.shape[-1]), b.shape[0] * b.shape[1], fraction) for b in backgrounds])
+    if (ends < 0).all():
+        raise ValueError("no zone of the background sets shows a significant direct return")
+    return int(ends.max())
+
+
+@dataclass(frozen=True)
+class Features:
+    """One set's preprocessed histograms.
+
+    values: (L, R, n, n, B - crop_start) float32 background-subtracted counts;
+    locations: (L,) gantry locations; shifts: (L, R) whole-bin alignment
+    shifts applied; crop_start: first kept bin of the original 128."""
+
+    values: np.ndarray
+    locations: np.ndarray
+    shifts: np.ndarray
+    crop_start: int
+
+
+def preprocess(hist: np.ndarray, locations: np.ndarray, background: np.ndarray, background_locations: np.ndarray, crop_start: int) -> Features:
+    """Align, subtract the background at matching locations, crop.
+
+    hist (L, R, n, n, B) and background (Lb, Rb, n, n, B) counts; the
+    background must cover every location of `locations`."""
+    pos = {int(k): i for i, k in enumerate(background_locations)}
+    missing = [int(k) for k in locations if int(k) not in pos]
+    if missing:
+        raise ValueError(f"the background set has no capture at locations {missing}")
+    bg = background[[pos[int(k)] for k in locations]]
+    if not 0 <= crop_start < hist.shape[-1]:
+        raise ValueError(f"crop_start {crop_start} is outside 0..{hist.shape[-1] - 1}")
+    shifts = alignment_shifts(hist, bg)
+    values = subtract_background(shift_bins(hist, shifts), bg)[..., crop_start:]
+    return Features(np.ascontiguousarray(values), np.asarray(locations), shifts, crop_start)
+
+
+def normalise(x: np.ndarray, kind: str, stats: tuple[float, float] | None = None) -> tuple[np.ndarray, tuple[float, float] | None]:
+    """Model input from background-subtracted counts.
+
+    kind "raw": the counts as float32 (stats unused, None returned).
+    kind "log_z": a signed log1p, sign(x) log1p(|x|), then a global scalar
+    z-score (x - mu) / sigma. On raw counts (all >= 0) the signed log equals
+    the reference's log1p(clip(x, 0)); after background subtraction it keeps
+    the negative half of the noise instead of piling it up at zero. mu and
+    sigma come from x when `stats` is None; pass the training part's
+    statistics to normalise anything else. Returns (array, (mu, sigma))."""
+    if kind == "raw":
+        return x.astype(np.float32, copy=False), None
+    if kind != "log_z":
+        raise ValueError(f"unknown normalisation {kind!r}; expected 'raw' or 'log_z'")
+    y = np.sign(x) * np.log1p(np.abs(x))
+    if stats is None:
+        stats = (float(y.mean()), float(y.std()) + 1e-6)
+    mu, sigma = stats
+    return ((y - mu) / max(sigma, 1e-6)).astype(np.float32), stats

@@ -1,0 +1,122 @@
+"""Alignment, background subtraction, crop window, normalisation."""
+
+import numpy as np
+import pytest
+
+from denali_pipe import preprocess as pp
+
+
+def _pulse(bins=128, at=47.0, height=6000.0, floor=1300.0, tail=2.5):
+    b = np.arange(bins)
+    t = b - at
+    return floor + height * np.where(t < 0, np.exp(-0.5 * (t / 1.2) ** 2), np.exp(-t / tail))
+
+
+def _set(L=4, R=3, n=3, shift=None, bump=0.0, seed=0):
+    rng = np.random.default_rng(seed)
+    base = np.stack([_pulse(at=45 + 2 * z) for z in range(n * n)]).reshape(n, n, -1)
+    h = np.broadcast_to(base, (L, R, n, n, 128)).copy()
+    h[..., 1, 1, 90:95] += bump
+    if shift is not None:
+        for (l, r), d in np.ndenumerate(shift):
+            h[l, r] = np.roll(h[l, r], d, axis=-1)
+    return rng.poisson(h).astype(np.int32)
+
+
+def test_alignment_undoes_whole_bin_shifts():
+    shifts = np.array([[0, 2, -1], [3, 0, 0], [0, 0, -2], [1, 1, -5]])
+    bg = _set(seed=1)
+    h = _set(shift=shifts, seed=2)
+    found = pp.alignment_shifts(h, bg)
+    assert np.array_equal(found, -shifts)
+    aligned = pp.shift_bins(h, found)
+    assert np.array_equal(pp.alignment_shifts(aligned, bg), np.zeros_like(shifts))
+
+
+def test_shift_fills_with_the_edge_floor_not_wrapped_counts():
+    h = np.zeros((1, 1, 1, 1, 8))
+    h[..., :] = [5, 5, 100, 5, 5, 5, 5, 9]
+    out = pp.shift_bins(h, np.array([[2]]))
+    assert out.ravel().tolist() == [5, 5, 5, 5, 100, 5, 5, 5]
+    out = pp.shift_bins(h, np.array([[-1]]))
+    assert out.ravel().tolist() == [5, 100, 5, 5, 5, 5, 9, 9]
+
+
+def test_alignment_refuses_absurd_shifts():
+    bg = _set(seed=1)
+    h = _set(shift=np.full((4, 3), pp.MAX_SHIFT_BINS + 3), seed=2)
+    with pytest.raises(ValueError, match="bins off the background"):
+        pp.alignment_shifts(h, bg)
+
+
+def test_subtraction_leaves_the_bump_and_zero_mean_noise():
+    bg = _set(seed=1)
+    h = _set(bump=200.0, seed=2)
+    d = pp.subtract_background(h, bg)
+    assert d.dtype == np.float32
+    assert d[..., 1, 1, 90:95].mean() == pytest.approx(200, abs=25)
+    assert abs(d[..., 0, 0, 100:].mean()) < 10
+
+
+def test_subtraction_shape_mismatch_is_an_error():
+    with pytest.raises(ValueError, match="do not match"):
+        pp.subtract_background(_set(L=4), _set(L=3))
+
+
+def test_crop_window_is_after_every_zones_direct_return():
+    bgs = [_set(L=10, seed=s) for s in (1, 2)]
+    start = pp.crop_window(bgs)
+    # latest zone peaks at 45 + 2*8 = 61; tail 2.5 bins down to 10 % of the floor
+    # (130 of 6000 counts): ln(6000/130) * 2.5 ~ 9.6 bins after the peak
+    assert 61 + 8 <= start <= 61 + 12
+    profile = np.mean([b.mean(axis=(0, 1)) for b in bgs], axis=0).reshape(9, -1)
+    floor = profile[:, :16].mean(axis=1)
+    assert np.all(profile[:, start:].max(axis=1) - floor < 0.2 * floor)
+
+
+def test_crop_window_ignores_zones_without_a_significant_return():
+    bg = _set(L=10, seed=1).astype(np.int64)
+    bg[:, :, 2, 2] = np.random.default_rng(3).poisson(0.5, bg[:, :, 2, 2].shape)  # a zone of shot noise only
+    ends = pp.direct_end(bg.mean(axis=(0, 1)).reshape(9, -1), n_averaged=30)
+    assert ends[8] == -1 and (ends[:8] > 0).all()
+    assert pp.crop_window([bg]) == ends.max()
+
+
+def test_preprocess_matches_locations_and_crops():
+    bg = _set(L=4, seed=1)
+    h = _set(L=3, bump=150.0, seed=2)
+    f = pp.preprocess(h, np.array([7, 3, 9]), bg, np.array([3, 5, 7, 9]), crop_start=80)
+    assert f.values.shape == (3, 3, 3, 3, 48)
+    assert f.values[..., 1, 1, 10:15].mean() == pytest.approx(150, abs=25)
+    with pytest.raises(ValueError, match="no capture at locations \\[8\\]"):
+        pp.preprocess(h, np.array([7, 3, 8]), bg, np.array([3, 5, 7, 9]), crop_start=80)
+
+
+def test_normalise_log_z_uses_given_statistics():
+    x = np.array([[0.0, 10.0, -10.0, 100.0]])
+    y, stats = pp.normalise(x, "log_z")
+    assert abs(y.mean()) < 1e-5 and y.std() == pytest.approx(1, abs=1e-4)
+    y2, stats2 = pp.normalise(x * 2, "log_z", stats)
+    assert stats2 == stats and not np.allclose(y2, y)
+    # on non-negative counts the signed log is the reference's log1p(clip(x, 0))
+    counts = np.array([0.0, 3.0, 1e4])
+    z, (mu, sigma) = pp.normalise(counts, "log_z")
+    assert np.allclose(z * sigma + mu, np.log1p(counts), atol=1e-5)
+    raw, none = pp.normalise(x, "raw")
+    assert none is None and raw.dtype == np.float32
+    with pytest.raises(ValueError, match="unknown normalisation"):
+        pp.normalise(x, "minmax")
+
+
+def test_normalise_never_produces_nan_on_constant_input():
+    y, _ = pp.normalise(np.zeros((5, 3)), "log_z")
+    assert np.isfinite(y).all()
+
+
+def test_alignment_works_on_photon_starved_8x8_zones():
+    rng = np.random.default_rng(5)
+    base = np.stack([_pulse(at=43 + z % 8 * 2, height=1.5, floor=0.6) for z in range(64)]).reshape(8, 8, -1)
+    bg = rng.poisson(np.broadcast_to(base, (4, 3, 8, 8, 128)))
+    h = rng.poisson(np.broadcast_to(np.roll(base, 2, axis=-1), (4, 3, 8, 8, 128)))
+    found = pp.alignment_shifts(h, bg)
+    assert (found == -2).mean() >= 0.75 and np.abs(found + 2).max() <= 1
