@@ -1,0 +1,18 @@
+"""The vocabulary of training cells (model x task x split x resolution x
+protocol x seed), light enough for the Snakefile to import: no torch, no sklearn."""
+
+from __future__ import annotations
+
+MODELS = ("mlp", "cnn1d", "cnn3d", "transformer")
+LINEAR = "linear"  # the classical reference model (classical.py)
+TASKS = ("location", "shape", "size")
+SPLITS = ("random", "repeats_grouped", "location_held_out", "shape_held_out", "size_held_out")
+PROTOCOLS = ("clean", "paper")
+
+# A classifier cannot name shapes (sizes) it never saw in training.
+ILL_POSED = {("shape_held_out", "shape"), ("size_held_out", "size")}
+
+
+def is_ill_posed(split: str, task: str) -> bool:
+    """True for evaluations whose test labels never occur in training."""
+    return (split, task) in ILL_POSED
