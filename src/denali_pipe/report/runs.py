@@ -1,0 +1,101 @@
+"""Training cells' results as tables: one row per cell, and mean/std over seeds."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+CELL_COLUMNS = ("model", "task", "split", "resolution", "protocol")
+# Table metric name -> (task, metric key in metrics.json); the paper's columns.
+METRICS = {
+    "loc_rmse": ("location", "rmse"),
+    "loc_mae": ("location", "mae"),
+    "shape_top1": ("shape", "top1"),
+    "shape_top5": ("shape", "top5"),
+    "shape_f1": ("shape", "f1"),
+    "size_precision": ("size", "precision"),
+    "size_recall": ("size", "recall"),
+    "size_accuracy": ("size", "top1"),
+}
+# The one metric per task that charts use, and whether higher is better.
+HEADLINE = {"location": ("rmse", False), "shape": ("top1", True), "size": ("top1", True)}
+NA = "n/a"
+
+
+def load_runs(paths: list[Path]) -> pd.DataFrame:
+    """One row per metrics.json: the cell's fields, seed, sizes, timings,
+    `test_<metric>` and `baseline_<metric>` columns."""
+    rows = []
+    for p in paths:
+        try:
+            m = json.loads(Path(p).read_text())
+            row = {**m["cell"], "params": m["params"], "n_train": m["n_train"], "n_validation": m["n_validation"], "n_test": m["n_test"]}
+        except (OSError, json.JSONDecodeError, KeyError) as e:
+            raise ValueError(f"{p}: not a training cell's metrics.json ({e})") from None
+        row.update(
+            best_epoch=m.get("best_epoch"),
+            epochs=m["hyper"].get("epochs"),
+            epochs_run=m.get("epochs_run"),
+            stopped_by_budget=m.get("stopped_by_budget", False),
+            batch_size=m["hyper"].get("batch_size"),
+            selected_on=m["selected_on"],
+            train_seconds=m["train_seconds"],
+            inference_seconds=m["inference_seconds"],
+            train_samples_per_second=m["train_samples_per_second"],
+            device=m.get("device"),
+        )
+        row.update({f"test_{k}": v for k, v in m["test"].items()})
+        row.update({f"baseline_{k}": v for k, v in m["baseline"].items()})
+        rows.append(row)
+    if not rows:
+        raise ValueError("no training cells given")
+    return pd.DataFrame(rows)
+
+
+def seed_stats(runs: pd.DataFrame, by: list[str], columns: list[str]) -> pd.DataFrame:
+    """Mean and std (ddof=1; 0 for a single seed) of `columns` over seeds,
+    per group of `by`; also n_seeds."""
+    g = runs.groupby(by, sort=False)
+    mean = g[columns].mean()
+    std = g[columns].std(ddof=1).fillna(0.0).add_suffix("_std")
+    out = pd.concat([mean, std, g.size().rename("n_seeds")], axis=1).reset_index()
+    return out
+
+
+def metric_table(runs: pd.DataFrame, key: str, keys: list[str], paper: dict) -> pd.DataFrame:
+    """Rows = values of `key` (e.g. split or model) in order `keys`, columns =
+    the paper's metrics, each with _std and the paper's value beside it;
+    cells never trained (ill-posed, or not run) read n/a."""
+    table = pd.DataFrame({key: keys})
+    for name, (task, metric) in METRICS.items():
+        sub = runs[runs["task"] == task]
+        col = f"test_{metric}"
+        stats = seed_stats(sub, [key], [col]).set_index(key) if len(sub) else pd.DataFrame()
+        table[name] = [round(float(stats.loc[k, col]), 4) if k in stats.index else NA for k in keys]
+        table[f"{name}_std"] = [round(float(stats.loc[k, f"{col}_std"]), 4) if k in stats.index else NA for k in keys]
+        table[f"paper_{name}"] = [_paper_value(paper, k, name) for k in keys]
+    seeds = runs.groupby(key)["seed"].nunique()
+    table["n_seeds"] = [int(seeds.get(k, 0)) for k in keys]
+    return table
+
+
+def _paper_value(paper: dict, key: str, name: str):
+    row = paper.get(key)
+    if row is None:
+        return ""  # not published
+    v = row.get(name)
+    return NA if v is None else v
+
+
+def protocol_of(runs: pd.DataFrame) -> str:
+    protocols = sorted(runs["protocol"].unique())
+    if len(protocols) != 1:
+        raise ValueError(f"a table shows one protocol; the cells mix {protocols}")
+    return protocols[0]
+
+
+def finite(x) -> bool:
+    return x is not None and np.isfinite(x)

@@ -1,0 +1,55 @@
+"""Table 10: per model and task, parameters, data sizes, training and inference
+cost, beside the paper's. Hours are measured wall-clock of our cells (mean
+over seeds), on the device each cell ran on; `epochs` is the configured
+count and `epochs_run` what the time budget allowed (mean over seeds)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from denali_pipe.atomic import atomic_file
+from denali_pipe.cells import MODELS, TASKS
+from denali_pipe.report.paper import TABLE10, TABLE10_COLUMNS
+from denali_pipe.report.runs import load_runs, protocol_of, seed_stats
+
+
+def write_table10(metrics_paths: list[Path], out: Path) -> None:
+    runs = load_runs(metrics_paths)
+    runs["train_hours"] = runs["train_seconds"] / 3600
+    runs["inference_hours"] = runs["inference_seconds"] / 3600
+    stats = seed_stats(runs, ["model", "task"], ["train_hours", "inference_hours", "train_samples_per_second"]).set_index(["model", "task"])
+    first = runs.groupby(["model", "task"]).first()
+    rows = []
+    for model in MODELS:
+        for task in TASKS:
+            if (model, task) not in stats.index:
+                continue
+            r, s, paper = first.loc[(model, task)], stats.loc[(model, task)], TABLE10.get((model, task), {})
+            ours = {
+                "params": int(r["params"]),
+                "train_size": int(r["n_train"]),
+                "train_hours": s["train_hours"],
+                "epochs": int(r["epochs"]),
+                "batch_size": int(r["batch_size"]),
+                "test_size": int(r["n_test"]),
+                "inference_hours": s["inference_hours"],
+            }
+            row = {"model": model, "task": task}
+            for c in TABLE10_COLUMNS:
+                row[c] = ours[c]
+                if c.endswith("hours"):
+                    row[f"{c}_std"] = s[f"{c}_std"]
+                row[f"paper_{c}"] = paper.get(c, "")
+            row["epochs_run"] = float(runs[(runs["model"] == model) & (runs["task"] == task)]["epochs_run"].mean())
+            row["stopped_by_budget"] = bool(runs[(runs["model"] == model) & (runs["task"] == task)]["stopped_by_budget"].any())
+            row["train_samples_per_second"] = s["train_samples_per_second"]
+            row["validation_size"] = int(r["n_validation"])
+            row["device"] = r["device"]
+            row["n_seeds"] = int(s["n_seeds"])
+            rows.append(row)
+    table = pd.DataFrame(rows)
+    table.insert(2, "protocol", protocol_of(runs))
+    with atomic_file(out) as tmp:
+        table.to_csv(tmp, index=False, float_format="%.6g")

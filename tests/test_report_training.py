@@ -1,0 +1,97 @@
+"""Training tables and figures from cells' metrics.json and curves.csv."""
+
+import json
+
+import pandas as pd
+import pytest
+
+from denali_pipe.cells import MODELS, SPLITS, TASKS, is_ill_posed
+from denali_pipe.report.curves import write_curves_figure
+from denali_pipe.report.paper import TABLE5, TABLE10
+from denali_pipe.report.speed_accuracy import pareto, write_speed_accuracy
+from denali_pipe.report.table2 import write_table2
+from denali_pipe.report.table5 import write_table5
+from denali_pipe.report.table10 import write_table10
+
+REG = {"mse": 0.0025, "rmse": 0.05, "mae": 0.04}
+CLS = {"top1": 0.5, "top5": 0.9, "precision": 0.45, "recall": 0.5, "f1": 0.47}
+
+
+def _write_cell(root, model, task, split, seed, protocol="clean", score=0.0):
+    d = root / protocol / "3x3" / split / f"{model}_{task}" / f"seed{seed}"
+    d.mkdir(parents=True)
+    test = {k: v + score for k, v in (REG if task == "location" else CLS).items()}
+    m = {
+        "cell": {"model": model, "task": task, "split": split, "resolution": "3x3", "protocol": protocol, "seed": seed},
+        "hyper": {"lr": 1e-3, "epochs": 10, "batch_size": 64, "norm": "raw"},
+        "selected_on": "validation", "n_train": 700, "n_validation": 140, "n_test": 300, "n_classes": 30, "params": 82340,
+        "best_epoch": 7, "test": test, "baseline": {k: v / 2 for k, v in test.items()},
+        "train_seconds": 36.0 * (1 + MODELS.index(model) if model in MODELS else 0.1), "inference_seconds": 0.36,
+        "train_samples_per_second": 700.0, "device": "cpu",
+    }  # fmt: skip
+    (d / "metrics.json").write_text(json.dumps(m))
+    curves = [(e, part, k, v + 0.01 * e) for e in range(1, 11) for part in ("train", "validation") for k, v in test.items()]
+    curves.append((7, "test", list(test)[0], 0.1))
+    pd.DataFrame(curves, columns=["epoch", "part", "metric", "value"]).to_csv(d / "curves.csv", index=False)
+    return d
+
+
+def test_table5_has_every_split_na_for_ill_posed_and_the_paper_beside(tmp_path):
+    paths = [
+        _write_cell(tmp_path, "cnn1d", t, s, seed, score=0.01 * i) / "metrics.json"
+        for s in SPLITS for t in TASKS for i, seed in enumerate((42, 43)) if not is_ill_posed(s, t)
+    ]  # fmt: skip
+    write_table5(paths, tmp_path / "table5.csv")
+    t = pd.read_csv(tmp_path / "table5.csv", keep_default_na=False).set_index("split")
+    assert list(t.index) == list(SPLITS)
+    assert t.loc["shape_held_out", "shape_top1"] == "n/a" and t.loc["size_held_out", "size_accuracy"] == "n/a"
+    assert t.loc["shape_held_out", "paper_shape_top1"] == "n/a"
+    assert float(t.loc["random", "loc_rmse"]) == pytest.approx(0.055)
+    assert float(t.loc["random", "loc_rmse_std"]) == pytest.approx(0.00707, abs=1e-4)
+    assert float(t.loc["random", "paper_loc_rmse"]) == TABLE5["random"]["loc_rmse"]
+    assert (t["protocol"] == "clean").all() and (t["n_seeds"] == 2).all()
+    cols = list(t.columns)
+    assert cols.index("paper_loc_rmse") == cols.index("loc_rmse") + 2
+
+
+def test_table5_refuses_other_models_and_mixed_protocols(tmp_path):
+    a = _write_cell(tmp_path, "mlp", "location", "random", 42) / "metrics.json"
+    with pytest.raises(ValueError, match="1D CNN"):
+        write_table5([a], tmp_path / "t.csv")
+    b = _write_cell(tmp_path, "cnn1d", "location", "random", 42) / "metrics.json"
+    c = _write_cell(tmp_path, "cnn1d", "location", "random", 43, protocol="paper") / "metrics.json"
+    with pytest.raises(ValueError, match="mix"):
+        write_table5([b, c], tmp_path / "t.csv")
+
+
+def test_table2_table10_speed_accuracy_and_curves(tmp_path):
+    paths = [_write_cell(tmp_path, m, t, "random", s) for m in [*MODELS, "linear"] for t in TASKS for s in (42, 43)]
+    nets = [p / "metrics.json" for p in paths if "linear" not in str(p)]
+    write_table2(nets, tmp_path / "table2.csv")
+    t2 = pd.read_csv(tmp_path / "table2.csv", keep_default_na=False).set_index("model")
+    assert list(t2.index) == list(MODELS)
+    assert t2.loc["mlp", "paper_shape_top1"] == "" and float(t2.loc["cnn1d", "paper_shape_top1"]) == TABLE5["random"]["shape_top1"]
+
+    write_table10(nets, tmp_path / "table10.csv")
+    t10 = pd.read_csv(tmp_path / "table10.csv").set_index(["model", "task"])
+    assert len(t10) == 12
+    assert t10.loc[("cnn3d", "shape"), "paper_params"] == TABLE10[("cnn3d", "shape")]["params"]
+    assert t10.loc[("cnn1d", "size"), "train_hours"] == pytest.approx(72 / 3600)
+
+    write_speed_accuracy([p / "metrics.json" for p in paths], tmp_path / "sva.png")
+    sva = pd.read_csv(tmp_path / "sva.csv")
+    assert (tmp_path / "sva.png").stat().st_size > 10_000
+    assert set(sva["model"]) == {*MODELS, "linear"} and len(sva) == 15
+    # every model has the same metric here, so only the fastest is on the front
+    assert sva[sva["pareto"]]["model"].unique().tolist() == ["linear"]
+
+    curves = [p / "curves.csv" for p in paths if "cnn1d_location" in str(p)]
+    write_curves_figure(curves, "location", "1D CNN", tmp_path / "fig16.png")
+    assert (tmp_path / "fig16.png").stat().st_size > 10_000
+    assert set(pd.read_csv(tmp_path / "fig16.csv")["part"]) == {"train", "validation", "test"}
+
+
+def test_pareto_front():
+    pts = pd.DataFrame({"train_seconds": [1, 10, 100, 5], "metric": [0.1, 0.3, 0.2, 0.05]})
+    assert pareto(pts, higher_is_better=True).tolist() == [True, True, False, False]
+    assert pareto(pts, higher_is_better=False).tolist() == [True, False, False, True]

@@ -1,0 +1,110 @@
+"""Training cells on small synthetic features: protocols, determinism, outputs."""
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from denali_pipe.classical import run_linear
+from denali_pipe.preprocess import normalise
+from denali_pipe.train import Cell, Hyper, partition, run_cell, targets
+
+CLASSES = ("A", "B", "circle")
+N_LOC, REPEATS, BINS = 8, 3, 24
+
+
+@pytest.fixture(scope="module")
+def data():
+    """Features whose bump position encodes the location's y, whose bump
+    height encodes size and whose width encodes the class."""
+    rng = np.random.default_rng(0)
+    rows, xs = [], []
+    t = np.arange(BINS)
+    for ci, cls in enumerate(CLASSES):
+        for size in ("4inch", "8inch"):
+            for light in ("lightoff", "lighton"):
+                for k in range(N_LOC):
+                    for r in range(REPEATS):
+                        x, y = 1.0 + 0.0365 * (k % 4), 0.2 + 0.0365 * (k // 4)
+                        centre = 4 + 12 * (y - 0.2) / 0.0365 + 2 * (k % 4)
+                        bump = (50 if size == "8inch" else 20) * np.exp(-0.5 * ((t - centre) / (1 + ci)) ** 2)
+                        xs.append(bump[None, None, :] * np.ones((3, 3, 1)) + rng.normal(0, 3, (3, 3, BINS)))
+                        rows.append({"set": f"{cls}_{size}_3x3_{light}", "object": cls, "class": cls, "type": "letter", "size": size, "light": light, "location": k, "repeat": r, "x": x, "y": y})
+    return np.stack(xs).astype(np.float32), pd.DataFrame(rows)
+
+
+def _cell(task="location", split="random", protocol="clean", model="cnn1d", seed=42):
+    return Cell(model=model, task=task, split=split, resolution="3x3", protocol=protocol, seed=seed)
+
+
+HP = Hyper(lr=3e-3, epochs=4, batch_size=32, norm="raw")
+
+
+def test_targets(data):
+    _, samples = data
+    y, classes = targets(samples, "shape")
+    assert classes == sorted(CLASSES) and y.dtype == np.int64
+    y, classes = targets(samples, "size")
+    assert classes == ["4inch", "8inch"] and set(y) == {0, 1}
+    y, classes = targets(samples, "location")
+    assert classes is None and y.shape == (len(samples), 2) and y.dtype == np.float32
+    with pytest.raises(ValueError, match="unknown task"):
+        targets(samples, "colour")
+
+
+def test_clean_protocol_selects_on_validation_and_tests_once(data):
+    x, samples = data
+    res = run_cell(x, samples, _cell(), HP, validation_fraction=0.2)
+    m, c = res.metrics, res.curves
+    assert m["selected_on"] == "validation" and m["n_validation"] > 0
+    assert m["n_train"] + m["n_validation"] + m["n_test"] == len(samples)
+    assert set(c["part"]) == {"train", "validation", "test"}
+    assert c[c["part"] == "test"]["epoch"].unique().tolist() == [m["best_epoch"]]
+    assert c[c["part"] == "validation"]["epoch"].nunique() == HP.epochs
+    assert {"rmse", "mae"} <= set(m["test"]) and m["params"] == 82340
+    assert m["train_samples_per_second"] > 0 and m["inference_seconds"] > 0
+
+
+def test_paper_protocol_selects_on_test(data):
+    x, samples = data
+    res = run_cell(x, samples, _cell(task="shape", protocol="paper"), HP, validation_fraction=0.2)
+    m, c = res.metrics, res.curves
+    assert m["selected_on"] == "test" and m["n_validation"] == 0
+    best = c[(c["part"] == "test") & (c["metric"] == "top1")].set_index("epoch")["value"]
+    assert m["test"]["top1"] == pytest.approx(best.max()) and m["best_epoch"] == best.idxmax()
+
+
+def test_clean_normalisation_statistics_come_from_the_training_part_only(data):
+    x, samples = data
+    hp = Hyper(lr=1e-3, epochs=1, batch_size=64, norm="log_z")
+    cell = _cell(task="size", split="location_held_out")
+    res = run_cell(x, samples, cell, hp, validation_fraction=0.2)
+    y, _ = targets(samples, "size")
+    split, val = partition(samples, y, cell, 0.2)
+    assert res.state["norm_stats"] == normalise(x[split.train], "log_z")[1]
+    assert res.state["norm_stats"] != normalise(x, "log_z")[1]
+
+
+def test_cells_are_deterministic_and_learn(data):
+    x, samples = data
+    a = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2)
+    b = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2)
+    assert a.metrics["test"] == b.metrics["test"]
+    assert all(torch.equal(a.state["model"][k], b.state["model"][k]) for k in a.state["model"])
+    assert a.metrics["test"]["top1"] > 0.8 > a.metrics["baseline"]["top1"]
+
+
+def test_linear_cell_beats_the_baseline(data):
+    x, samples = data
+    res = run_linear(x, samples, _cell(model="linear", task="location"), validation_fraction=0.2)
+    m = res.metrics
+    assert m["test"]["rmse"] < 0.5 * m["baseline"]["rmse"]
+    assert m["selected_on"] == "validation" and m["selected_regularisation"] in m["hyper"]["regularisation"]
+    res = run_linear(x, samples, _cell(model="linear", task="shape", split="size_held_out"), validation_fraction=0.2)
+    assert res.metrics["test"]["top1"] > 1 / len(CLASSES)
+
+
+def test_unknown_protocol_is_refused(data):
+    x, samples = data
+    with pytest.raises(ValueError, match="unknown protocol"):
+        run_cell(x, samples, _cell(protocol="sloppy"), HP, validation_fraction=0.2)
