@@ -1,0 +1,221 @@
+"""The digital twin's scene as plain arrays: what every renderer draws.
+
+The geometry is the calibrated one (`results/calibration/scene.json`, written
+by `poses.calibrate.scene_dict`): relay wall, table tops, sensor pose,
+tracking camera, object pose per gantry location. On top of it the twin
+follows the paper's (supplement section 11.4):
+
+- one laser spot: a pulsed point source at the sensor aimed along the
+  sensor's axis, so the spot is where the centre of the TMF8828's flood
+  illumination lands on the wall;
+- the film is the wall footprint of the centre zone of the 3x3 grid, a
+  wall-aligned rectangle sampled at `film` x `film` pixel centres. The relay
+  surface *is* that patch (the rest of the wall adds no three-bounce path
+  between spot, object and footprint, and a whole-wall film would spend
+  almost every sample outside the footprint);
+- the object is its wall-facing face only (a Lambertian plate): the rig's
+  model of it, and with it both renderers see exactly the same surface;
+- table tops optionally (mitransient only).
+
+Units: metres; albedos unitless.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from denali_pipe import geometry as geo
+from denali_pipe.geometry import Camera, Intrinsics, Pose, Rect
+
+CENTRE_ZONE_GRID = 3  # the twin matches the centre pixel of the 3x3 captures
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """What the twin reads from scene.json.
+
+    sensor_rotation: (3, 3) sensor -> world, OpenCV axes (x right, y down,
+    z forward). tags: {tag id: Pose (tag frame -> world)}.
+    object_poses/tag1_poses: {gantry location: Pose (object mesh frame /
+    object tag frame -> world)}."""
+
+    path: Path
+    wall: Rect
+    tables: tuple[Rect, ...]
+    sensor_position: np.ndarray
+    sensor_rotation: np.ndarray
+    tracking_camera: Camera
+    tags: dict[int, Pose]
+    object_poses: dict[int, Pose]
+    tag1_poses: dict[int, Pose]
+
+    @property
+    def locations(self) -> list[int]:
+        return sorted(self.object_poses)
+
+
+def _rect(d: dict) -> Rect:
+    return Rect(np.asarray(d["centre"], float), np.asarray(d["u"], float), np.asarray(d["v"], float), tuple(map(float, d["size"])))
+
+
+def load_calibration(path: str | Path) -> Calibration:
+    """Read scene.json. Raises ValueError naming the file and the missing or
+    empty section (wall, sensor, tracking_camera, locations, table)."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: not valid JSON ({e})") from None
+    for key in ("wall", "sensor", "tracking_camera", "locations", "table"):
+        if not doc.get(key):
+            raise ValueError(f"{path}: the calibrated scene has no {key!r} (the calibration could not estimate it)")
+    try:
+        cam = doc["tracking_camera"]
+        camera = Camera(
+            "tracking", Intrinsics.from_dict(cam["intrinsics"]),
+            np.asarray(cam["R_world_to_camera"], float), np.asarray(cam["t_world_to_camera"], float),
+        )  # fmt: skip
+        sensor = doc["sensor"]
+        return Calibration(
+            path=path,
+            wall=_rect(doc["wall"]),
+            tables=tuple(_rect(r) for _, r in sorted(doc["table"]["rectangles"].items())),
+            sensor_position=np.asarray(sensor["position"], float),
+            sensor_rotation=np.asarray(sensor["pose"]["R"], float),
+            tracking_camera=camera,
+            tags={int(k): geo.pose(t["rotation"], t["position"]) for k, t in doc.get("tags", {}).items()},
+            object_poses={int(k): geo.pose(rec["object"]["R"], rec["object"]["t"]) for k, rec in doc["locations"].items()},
+            tag1_poses={int(k): geo.pose(rec["tag1"]["R"], rec["tag1"]["t"]) for k, rec in doc["locations"].items()},
+        )
+    except (KeyError, TypeError) as e:
+        raise ValueError(f"{path}: malformed calibrated scene ({type(e).__name__}: {e})") from None
+
+
+# --- where the sensor looks ----------------------------------------------------------------
+
+
+def _ray(cal: Calibration, tx: float, ty: float) -> np.ndarray:
+    """World direction of the sensor ray through tangent-plane point (tx, ty)."""
+    d = cal.sensor_rotation @ np.array([tx, ty, 1.0])
+    return d / np.linalg.norm(d)
+
+
+def laser_spot(cal: Calibration) -> np.ndarray:
+    """(3,) where the sensor's axis meets the wall plane: the laser spot."""
+    return geo.intersect_plane(cal.sensor_position, _ray(cal, 0.0, 0.0), cal.wall)
+
+
+def zone_footprint(cal: Calibration, scale: float = 1.0) -> Rect:
+    """The centre 3x3 zone's wall footprint as a wall-aligned rectangle.
+
+    The zone's view cone meets the wall in a near-trapezoid; the rectangle
+    spans the midpoints of its four edges (so its area matches the
+    trapezoid's to first order) and is scaled by `scale` about its centre."""
+    th, tv = (np.tan(np.deg2rad(a / 2)) / CENTRE_ZONE_GRID for a in geo.SENSOR_FOV_DEG)
+    mids = [(-th, 0.0), (th, 0.0), (0.0, -tv), (0.0, tv)]  # left, right, top, bottom edge midpoints
+    p = np.array([geo.intersect_plane(cal.sensor_position, _ray(cal, x, y), cal.wall) for x, y in mids])
+    w = cal.wall
+    rel = p - w.centre
+    pu, pv = rel @ w.u, rel @ w.v
+    cu, cv = (pu[0] + pu[1]) / 2, (pv[2] + pv[3]) / 2
+    size = (abs(pu[1] - pu[0]) * scale, abs(pv[3] - pv[2]) * scale)
+    return Rect(w.centre + cu * w.u + cv * w.v, w.u, w.v, size)
+
+
+def pixel_centres(relay: Rect, film: int) -> np.ndarray:
+    """(film, film, 3) film pixel centres on `relay`: row i runs along +v
+    (row 0 at the bottom edge), column j along +u, as mitransient's
+    `nlos_capture_meter` samples them (one point per pixel, at its centre)."""
+    t = (np.arange(film) + 0.5) / film - 0.5
+    return relay.centre + t[None, :, None] * relay.size[0] * relay.u + t[:, None, None] * relay.size[1] * relay.v
+
+
+def pixels_inside(relay: Rect, film: int, patch: Rect) -> np.ndarray:
+    """(film, film) bool: the pixels of a film over `relay` whose centres lie in `patch`."""
+    rel = pixel_centres(relay, film) - patch.centre
+    return (np.abs(rel @ patch.u) <= patch.size[0] / 2) & (np.abs(rel @ patch.v) <= patch.size[1] / 2)
+
+
+# --- the object --------------------------------------------------------------------------
+
+
+def front_face(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+    """The wall-facing (-z, local) faces of an object mesh as a compact
+    triangle mesh: vertices (V, 3) local metres, faces (F, 3) int. Face
+    winding is kept, so the geometric normals face the wall."""
+    front = mesh.faces[mesh.face_normals[:, 2] < -0.5]
+    if not len(front):
+        raise ValueError("the object mesh has no wall-facing (-z) faces")
+    used, faces = np.unique(front, return_inverse=True)
+    return np.asarray(mesh.vertices[used], float), faces.reshape(-1, 3)
+
+
+@dataclass(frozen=True)
+class TwinScene:
+    """One object at one size in the calibrated scene; everything a renderer needs.
+
+    relay: the film's wall patch; film: pixels per side; sensor: (3,) the
+    sensor and laser origin; spot: (3,) the laser spot on the wall; mesh: the
+    object's full mesh (local); vertices/faces: its wall-facing face (local);
+    poses: {location: object pose}; tables: table tops (empty without table)."""
+
+    relay: Rect
+    film: int
+    sensor: np.ndarray
+    spot: np.ndarray
+    mesh: trimesh.Trimesh
+    vertices: np.ndarray
+    faces: np.ndarray
+    poses: dict[int, Pose]
+    wall_albedo: float
+    object_albedo: float
+    tables: tuple[Rect, ...] = ()
+    table_albedo: float = 0.0
+
+
+def twin_scene(cal: Calibration, mesh: trimesh.Trimesh, twin: dict, relay: Rect | None = None, film: int | None = None) -> TwinScene:
+    """The twin of one object mesh from the calibration and the config's
+    `twin` section (footprint, albedos, table). `relay`/`film` override the
+    footprint patch and its film (the benchmark's whole-wall film)."""
+    vertices, faces = front_face(mesh)
+    return TwinScene(
+        relay=relay if relay is not None else zone_footprint(cal, twin["footprint"]["scale"]),
+        film=int(film if film is not None else twin["footprint"]["film"]),
+        sensor=cal.sensor_position,
+        spot=laser_spot(cal),
+        mesh=mesh,
+        vertices=vertices,
+        faces=faces,
+        poses=cal.object_poses,
+        wall_albedo=float(twin["wall_albedo"]),
+        object_albedo=float(twin["object_albedo"]),
+        tables=cal.tables if twin["table"] else (),
+        table_albedo=float(twin["table_albedo"]),
+    )
+
+
+def nominal_scene(locations) -> dict:
+    """A scene.json document (the parts `load_calibration` reads) from the
+    rig's design geometry in `denali_pipe.geometry`, for gantry `locations`:
+    what a perfect calibration would give. For tests and benchmarks that run
+    without the pose stage."""
+    from denali_pipe.poses.calibrate import sensor_mount
+
+    def rect(r: Rect) -> dict:
+        return {"centre": r.centre.tolist(), "u": r.u.tolist(), "v": r.v.tolist(), "size": list(r.size)}
+
+    cam = geo.TRACKING_CAMERA
+    sensor = geo.STATIC_TAGS[geo.SENSOR_TAG_ID] @ sensor_mount()
+    return {
+        "wall": rect(geo.WALL),
+        "table": {"rectangles": {str(k): rect(r) for k, r in geo.TABLES.items()}},
+        "sensor": {"pose": sensor.to_dict(), "position": sensor.t.tolist()},
+        "tracking_camera": {"intrinsics": cam.intrinsics.to_dict(), "R_world_to_camera": cam.R_wc.tolist(), "t_world_to_camera": cam.t_wc.tolist()},
+        "tags": {str(k): {"position": p.t.tolist(), "rotation": p.R.tolist()} for k, p in geo.STATIC_TAGS.items()},
+        "locations": {str(int(k)): {"object": geo.object_pose(int(k)).to_dict(), "tag1": geo.tag1_pose(int(k)).to_dict()} for k in locations},
+    }

@@ -1,0 +1,104 @@
+"""The twin's scene as arrays: calibration reader, footprint, laser spot, object face."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from denali_pipe import geometry as geo
+from denali_pipe.objects import load_catalogue, object_mesh
+from denali_pipe.twin.layout import (
+    front_face,
+    laser_spot,
+    load_calibration,
+    nominal_scene,
+    pixel_centres,
+    pixels_inside,
+    twin_scene,
+    zone_footprint,
+)
+
+from conftest import REPO
+
+LOCATIONS = (0, 45, 99)
+
+
+@pytest.fixture(scope="module")
+def cal(tmp_path_factory):
+    path = tmp_path_factory.mktemp("scene") / "scene.json"
+    path.write_text(json.dumps(nominal_scene(LOCATIONS)))
+    return load_calibration(path)
+
+
+def test_calibration_reads_the_design_back(cal):
+    assert cal.locations == list(LOCATIONS)
+    assert np.allclose(cal.wall.centre, geo.WALL.centre) and np.allclose(cal.wall.normal, [0, -1, 0])
+    assert np.allclose(cal.sensor_position, geo.SENSOR_POSITION, atol=1e-9)
+    assert np.allclose(cal.sensor_rotation[:, 2], geo.SENSOR_FORWARD, atol=1e-9)
+    assert np.allclose(cal.object_poses[45].t, geo.object_pose(45).t)
+    assert len(cal.tables) == 2
+
+
+@pytest.mark.parametrize("key", ["wall", "sensor", "locations"])
+def test_missing_section_names_file_and_key(tmp_path, key):
+    doc = nominal_scene(LOCATIONS)
+    doc[key] = None
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError) as e:
+        load_calibration(path)
+    assert str(path) in str(e.value) and repr(key) in str(e.value)
+
+
+def test_footprint_is_the_centre_zone_on_the_wall(cal):
+    fp = zone_footprint(cal)
+    # the zone's rays as geometry.zone_directions tiles them (nominal sensor = calibrated here)
+    dirs, _ = geo.zone_directions(3, 16)
+    q = geo.intersect_plane(geo.SENSOR_POSITION, dirs[1, 1].reshape(-1, 3), geo.WALL)
+    rel = q - fp.centre
+    assert np.allclose(fp.centre, q.mean(axis=0), atol=0.01)
+    assert abs(np.ptp(rel @ fp.u) - fp.size[0]) < 0.015 and abs(np.ptp(rel @ fp.v) - fp.size[1]) < 0.015
+    assert abs((fp.centre - cal.wall.centre) @ cal.wall.normal) < 1e-9  # on the wall plane
+    assert np.allclose(zone_footprint(cal, 0.5).size, np.array(fp.size) / 2)
+
+
+def test_laser_spot_is_on_the_axis_inside_the_footprint(cal):
+    p = laser_spot(cal)
+    fp = zone_footprint(cal)
+    d = p - cal.sensor_position
+    assert np.allclose(d / np.linalg.norm(d), geo.SENSOR_FORWARD, atol=1e-9)
+    assert pixels_inside(fp, 1, fp).all()
+    rel = p - fp.centre
+    assert abs(rel @ fp.u) < fp.size[0] / 2 and abs(rel @ fp.v) < fp.size[1] / 2
+
+
+def test_pixel_centres_rows_up_columns_along_u(cal):
+    fp = zone_footprint(cal)
+    x = pixel_centres(fp, 4)
+    assert x.shape == (4, 4, 3)
+    assert (np.diff(x[..., 2], axis=0) > 0).all()  # rows climb (+v = +z)
+    assert (np.diff(x[..., 0], axis=1) > 0).all()  # columns run along +u = +x
+    assert np.allclose(x.reshape(-1, 3).mean(axis=0), fp.centre)
+    whole = pixels_inside(cal.wall, 64, fp)
+    assert 100 < whole.sum() < 300  # the paper's 64x64 film puts ~1/20 of its pixels in the footprint
+
+
+def test_front_face_faces_the_wall(cal):
+    mesh = object_mesh(load_catalogue(REPO / "config/objects.tsv")["A"], "8inch")
+    v, f = front_face(mesh)
+    assert f.max() == len(v) - 1
+    assert np.allclose(v[:, 2], v[0, 2])  # one plane, the wall side of the plate
+    pose = cal.object_poses[0]
+    tri = pose.apply(v)[f]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    assert (n @ cal.wall.normal < 0).all()  # winding normals face the wall (against its normal)
+
+
+def test_twin_scene_takes_settings(cal):
+    mesh = object_mesh(load_catalogue(REPO / "config/objects.tsv")["circle"], "4inch")
+    settings = {"footprint": {"film": 4, "scale": 1.0}, "wall_albedo": 0.9, "object_albedo": 0.4, "table": True, "table_albedo": 0.3}
+    tw = twin_scene(cal, mesh, settings)
+    assert tw.film == 4 and tw.object_albedo == 0.4 and len(tw.tables) == 2
+    assert len(twin_scene(cal, mesh, {**settings, "table": False}).tables) == 0

@@ -1,0 +1,173 @@
+"""The twin's renderers: Mitsuba scenes for every object, mitransient against
+the analytic model, arrival times, tables, the render job and its store."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from denali_pipe import geometry as geo
+from denali_pipe.cli import main
+from denali_pipe.objects import front_samples, load_catalogue, object_mesh
+from denali_pipe.twin.analytic import AnalyticRenderer
+from denali_pipe.twin.layout import load_calibration, nominal_scene, pixel_centres, twin_scene
+from denali_pipe.twin.render import read_twin, render_twin
+
+from conftest import REPO
+
+LOCATIONS = (0, 9, 55, 99)  # near/far from the wall, both ends of the gantry
+SETTINGS = {
+    "renderer": "analytic",
+    "wall_albedo": 1.0,
+    "object_albedo": 0.5,
+    "table": False,
+    "table_albedo": 0.5,
+    "footprint": {"film": 8, "scale": 1.0},
+    "analytic": {"samples": 60},
+    "mitransient": {"variant": "auto", "spp": 4000, "max_depth": 3},
+}
+
+
+@pytest.fixture(scope="module")
+def scene_json(tmp_path_factory):
+    path = tmp_path_factory.mktemp("scene") / "scene.json"
+    path.write_text(json.dumps(nominal_scene(LOCATIONS)))
+    return path
+
+
+@pytest.fixture(scope="module")
+def cal(scene_json):
+    return load_calibration(scene_json)
+
+
+@pytest.fixture(scope="module")
+def catalogue():
+    return load_catalogue(REPO / "config" / "objects.tsv")
+
+
+@pytest.fixture(scope="module")
+def mi():
+    from denali_pipe.twin.variant import load_mitsuba
+
+    return load_mitsuba("auto")
+
+
+def mitransient(twin, spp, seed=1):
+    from denali_pipe.twin.mitransient import MitransientRenderer
+
+    return MitransientRenderer(twin, spp, 3, seed)
+
+
+def test_every_catalogue_object_builds_a_scene(mi, cal, catalogue):
+    from denali_pipe.twin.scene import transient_scene
+
+    for spec in catalogue.values():
+        for size in spec.sizes:
+            twin = twin_scene(cal, object_mesh(spec, size), SETTINGS)
+            scene = mi.load_dict(transient_scene(mi, twin, 3, "transient_nlos_path", LOCATIONS[0]))
+            ids = sorted(s.id() for s in scene.shapes())
+            assert ids == ["object", "relay"], (spec.name, size)
+            area = scene.shapes()[ids.index("object")].surface_area()[0]
+            assert area == pytest.approx(front_samples(twin.mesh, 0.002)[1].sum(), rel=0.01), (spec.name, size)
+
+
+@pytest.mark.parametrize("name,size", [("A", "8inch"), ("1", "4inch")])
+def test_mitransient_agrees_with_the_analytic_model(cal, catalogue, name, size):
+    twin = twin_scene(cal, object_mesh(catalogue[name], size), SETTINGS)
+    mt, an = mitransient(twin, 4000), AnalyticRenderer(twin, 60)
+    for location in (0, 99):
+        m, a = mt.render(location), an.render(location)
+        assert m.shape == a.shape == (8, 8, geo.N_BINS)
+        m1, a1 = m.mean(axis=(0, 1)), a.mean(axis=(0, 1))
+        assert np.corrcoef(m1, a1)[0, 1] >= 0.99
+        # same units: the scale factor is 1 (not fitted)
+        assert a1.sum() / m1.sum() == pytest.approx(1.0, abs=0.03)
+        assert np.linalg.norm(a1 - m1) / np.linalg.norm(m1) < 0.03
+        # per pixel too: the films are laid out alike
+        assert np.corrcoef(m.sum(-1).ravel(), a.sum(-1).ravel())[0, 1] > 0.99
+
+
+def test_arrival_bin_matches_the_geometric_path(cal, catalogue):
+    """The first non-empty bin is where the shortest laser -> spot -> object ->
+    footprint -> sensor path lands, for both renderers."""
+    twin = twin_scene(cal, object_mesh(catalogue["square"], "4inch"), SETTINGS)
+    pts, _ = front_samples(twin.mesh, 0.001)
+    x = pixel_centres(twin.relay, twin.film).reshape(-1, 3)
+    for location in (0, 55):
+        o = twin.poses[location].apply(pts)
+        opl = (
+            np.linalg.norm(twin.spot - twin.sensor) + np.linalg.norm(o - twin.spot, axis=1)[None, :]
+            + np.linalg.norm(x[:, None] - o[None], axis=-1) + np.linalg.norm(x - twin.sensor, axis=1)[:, None]
+        )  # fmt: skip
+        first, last = geo.opl_to_bin(opl.min()), geo.opl_to_bin(opl.max())
+        for h in (mitransient(twin, 2000).render(location), AnalyticRenderer(twin, 60).render(location)):
+            bins = np.flatnonzero(h.mean(axis=(0, 1)) > 0)
+            assert abs(bins[0] - np.floor(first)) <= 1 and abs(bins[-1] - np.floor(last)) <= 1, (location, bins[[0, -1]], first, last)
+
+
+def test_table_scene_subtracts_the_table_and_keeps_the_object(cal, catalogue):
+    """With table tops at depth 3 the object's three-bounce return is
+    unchanged (nothing occludes it): the table-safe sampling and the
+    wall-and-table subtraction must give the analytic model back."""
+    twin = twin_scene(cal, object_mesh(catalogue["square"], "8inch"), {**SETTINGS, "table": True})
+    m = mitransient(twin, 8000).render(55).mean(axis=(0, 1))
+    a = AnalyticRenderer(twin_scene(cal, twin.mesh, SETTINGS), 60).render(55).mean(axis=(0, 1))
+    assert np.corrcoef(m, a)[0, 1] > 0.99
+    assert m.sum() / a.sum() == pytest.approx(1.0, abs=0.03)
+    # the object's share of the samples: ~1 % noise here, ~6 % with mitransient's area-proportional choice
+    assert np.linalg.norm(m - a) / np.linalg.norm(a) < 0.03
+
+
+def test_analytic_refuses_a_table(cal, catalogue):
+    twin = twin_scene(cal, object_mesh(catalogue["square"], "8inch"), {**SETTINGS, "table": True})
+    with pytest.raises(ValueError, match="table"):
+        AnalyticRenderer(twin, 60)
+
+
+def test_render_job_writes_the_twin_store(scene_json, catalogue, tmp_path):
+    out = tmp_path / "circle_8inch.zarr"
+    render_twin(catalogue["circle"], "8inch", scene_json, {"seed": 7, "twin": SETTINGS}, out)
+    t = read_twin(out)
+    assert t.locations.tolist() == list(LOCATIONS)
+    assert t.histograms.shape == (len(LOCATIONS), geo.N_BINS) and t.histograms.dtype == np.float32
+    assert (t.histograms.sum(axis=1) > 0).all()
+    assert t.attrs["renderer"] == "analytic" and t.attrs["object"]["name"] == "circle" and t.attrs["size"] == "8inch"
+    assert t.attrs["bin_width_opl"] == geo.BIN_WIDTH_OPL and t.attrs["start_opl"] == geo.HIST_START_OPL
+    # nearer the wall and the footprint: an earlier return
+    assert np.argmax(t.histogram(9)) < np.argmax(t.histogram(99))
+    with pytest.raises(KeyError, match="no location 3"):
+        t.histogram(3)
+    assert not any(p.name.startswith(".") for p in tmp_path.iterdir())
+
+
+def test_render_verb(scene_json, catalogue, tmp_path, caplog):
+    out = tmp_path / "A_4inch.zarr"
+    cfg = {"seed": 1, "twin": {**SETTINGS, "renderer": "mitransient", "mitransient": {**SETTINGS["mitransient"], "spp": 200}}}
+    args = ["render", str(scene_json), "--object", json.dumps(catalogue["A"].to_dict()), "--size", "4inch", "--config", json.dumps(cfg), "--out", str(out)]
+    assert main(args) == 0
+    assert read_twin(out).attrs["renderer"] == "mitransient"
+    args[args.index("--config") + 1] = json.dumps({"seed": 1})
+    assert main(args) == 1
+    assert "lacks the keys ['twin']" in caplog.text
+
+
+def test_rgb_view_reproduces_the_calibrated_camera(mi, cal, catalogue):
+    """Tags in the Mitsuba render of the tracking camera's view are decoded
+    with their ids where the calibrated camera projects them."""
+    import cv2
+    from pyapriltags import Detector
+
+    from denali_pipe.twin.scene import render_rgb, rgb_scene
+
+    camera = cal.tracking_camera.scaled(0.5)
+    twin = twin_scene(cal, object_mesh(catalogue["A"], "8inch"), SETTINGS)
+    img = render_rgb(mi, rgb_scene(mi, cal, twin, 55, camera, 64), seed=3)
+    assert img.shape == (camera.height, camera.width, 3) and img.dtype == np.uint8
+    tags = {**cal.tags, geo.OBJECT_TAG_ID: cal.tag1_poses[55]}
+    found = Detector(families="tag36h11").detect(cv2.cvtColor(img, cv2.COLOR_RGB2GRAY))
+    assert len(found) >= 3
+    for d in found:
+        expected = camera.project(tags[d.tag_id].t)[0]
+        assert np.linalg.norm(d.center - 0.5 - expected) < 1.0, d.tag_id  # AprilTag pixel centres sit at +0.5
