@@ -6,6 +6,10 @@ include: "rules/common.smk"
 include: "rules/rig.smk"
 include: "rules/ingest.smk"
 include: "rules/poses.smk"
+include: "rules/twin.smk"
+include: "rules/preprocess.smk"
+include: "rules/train.smk"
+include: "rules/report.smk"
 
 
 rule all:
@@ -15,4 +19,14 @@ rule all:
         "results/table4.csv",
         "results/table6.csv",
         "results/fig12.png",
+        "results/calibration/detections.csv",
+        "results/table5.csv",
+        "results/table2.csv",
+        "results/table10.csv",
+        "results/fig16.png",
+        "results/fig17.png",
+        "results/speed_vs_accuracy.png",
+        TWINS,
+        "results/render_benchmark.png",
+        "results/fig18.png",
     default_target: True

@@ -7,6 +7,7 @@ from snakemake.utils import min_version, validate
 from pathlib import Path
 
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name
+from denali_pipe.cells import LINEAR, MODELS, SPLITS, TASKS, is_ill_posed
 from denali_pipe.objects import BACKGROUNDS, load_catalogue
 
 min_version("9.0")
@@ -31,6 +32,12 @@ SET_NAMES = [s.name for s in SETS]
 
 wildcard_constraints:
     set=r"[A-Za-z0-9]+_(4inch|8inch)_(3x3|8x8)_(lighton|lightoff)",
+    res=r"3x3|8x8",
+    protocol=r"clean|paper",
+    split="|".join(SPLITS),
+    model="|".join((*MODELS, LINEAR)),
+    task="|".join(TASKS),
+    seed=r"\d+",
     object=r"[A-Za-z0-9]+",
     size=r"4inch|8inch",
 
@@ -98,3 +105,59 @@ def figure_set():
     if not lit:
         raise ValueError("the pose stage needs at least one light-on capture set (config `lightings`)")
     return lit[0]
+
+
+def lit_pose_tables():
+    return [f"results/poses/{s.name}.parquet" for s in SETS if s.light_on]
+
+
+# --- preprocessing -----------------------------------------------------------
+
+
+def background_store(wildcards):
+    return store(background_of(parse_set_name(wildcards.set)).name)
+
+
+def benchmark_sets(res):
+    """The benchmark's capture sets at a resolution: base objects, both sizes and lightings."""
+    return [s.name for s in SETS if s.resolution == res and not s.is_background and CATALOGUE[s.object].variant == "base"]
+
+
+# --- training ----------------------------------------------------------------
+
+TRAIN = config["train"]
+RUN_DIR = "results/runs/{protocol}/{res}/{split}/{model}_{task}/seed{seed}"
+
+
+def run_dirs(models, tasks, splits):
+    """Cells of the configured protocol, resolution and seeds; ill-posed
+    (split, task) pairs are never trained (tables report them as n/a)."""
+    return [
+        RUN_DIR.format(protocol=TRAIN["protocol"], res=TRAIN["resolution"], split=sp, model=m, task=t, seed=seed)
+        for m in models for t in tasks for sp in splits for seed in TRAIN["seeds"]
+        if not is_ill_posed(sp, t)
+    ]  # fmt: skip
+
+
+def run_files(models, tasks, splits, name="metrics.json"):
+    return [f"{d}/{name}" for d in run_dirs(models, tasks, splits)]
+
+
+def cell_arg(wildcards):
+    cell = {k: wildcards[k] for k in ("model", "task", "split", "protocol")}
+    cell.update(resolution=wildcards.res, seed=int(wildcards.seed))
+    return shlex.quote(json.dumps(cell, sort_keys=True))
+
+
+def hyper_arg(wildcards):
+    if wildcards.model == LINEAR:
+        return shlex.quote("{}")
+    hp = dict(TRAIN["hyper"][wildcards.model][wildcards.task])
+    if TRAIN["max_epochs"] is not None:
+        hp["epochs"] = min(hp["epochs"], TRAIN["max_epochs"])
+    return shlex.quote(json.dumps(hp, sort_keys=True))
+
+
+def budget_arg(wildcards):
+    budget = TRAIN["budget_seconds"]
+    return "" if budget is None or wildcards.model == LINEAR else f"--budget-seconds {budget}"

@@ -1,5 +1,6 @@
 # Tracking poses: AprilTag detection and PnP per capture set, then one
-# calibration over all sets (world frame, z-score filtering, scene, Table 6, Fig 12).
+# calibration over the light-on sets (world frame, z-score filtering, scene,
+# Table 6, Fig 12) and detection rates over every set.
 
 
 rule poses:
@@ -19,12 +20,11 @@ rule poses:
 
 rule calibrate:
     input:
-        poses=[f"results/poses/{name}.parquet" for name in SET_NAMES],
+        poses=lit_pose_tables(),
         figure_store=store(figure_set()),
     output:
         positions="results/calibration/tag1_positions.parquet",
         scene="results/calibration/scene.json",
-        detections="results/calibration/detections.csv",
         table6="results/table6.csv",
         fig12="results/fig12.png",
     log:
@@ -34,3 +34,16 @@ rule calibrate:
     shell:
         "denali calibrate {input.poses} --figure-store {input.figure_store} --outdir results/calibration"
         " --table6 {output.table6} --fig12 {output.fig12} > {log} 2>&1"
+
+
+rule detections:
+    input:
+        [f"results/poses/{name}.parquet" for name in SET_NAMES],
+    output:
+        "results/calibration/detections.csv",
+    log:
+        "logs/detections.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali detections {input} --out {output} > {log} 2>&1"

@@ -12,11 +12,13 @@ from denali_pipe.capture_sets import expected_sets
 from denali_pipe.geometry import select_locations
 from denali_pipe.io.store import open_set
 from denali_pipe.objects import load_catalogue
+from denali_pipe.twin.render import read_twin
 
 from workflow import copy_workflow, snakemake
 
 pytestmark = pytest.mark.e2e
 TINY = ("--configfile", "config/presets/tiny.yaml")
+TARGETS = ("results/render_benchmark.png", "results/fig18.png")
 
 
 @pytest.fixture(scope="module")
@@ -78,8 +80,17 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     preset.write_text(preset.read_text().replace("generalization1white]", "generalization1white, newplus]"))
     out = snakemake(wd, "-n", *TINY).stdout
     jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
-    assert jobs == {"rig": 2, "ingest": 8, "poses": 8, "index": 1, "table4": 1, "calibrate": 1, "all": 1, "total": 22}
-    assert sorted(re.findall(r"wildcards: object=(\w+), size=(\w+)", out)) == [("newplus", "4inch"), ("newplus", "8inch")]
+    per_set = {"rig": 2, "ingest": 8, "poses": 8, "preprocess": 4}
+    aggregates = {"index": 1, "table4": 1, "calibrate": 1, "detections": 1, "dataset": 1, "render_benchmark": 1, "fig18": 1, "all": 1}
+    # every training cell reads the dataset; tiny: 1 seed, 13 Table 5 cells + 9 more Table 2 cells + 3 linear
+    training = {"train": 25, "table5": 1, "table2": 1, "table10": 1, "training_curves": 2, "speed_vs_accuracy": 1}
+    # Every twin (8 old + 2 new) renders from the calibration, an aggregate over
+    # every light-on set, which the new sets change.
+    twins = {"twin": 10}
+    expected = {**per_set, **aggregates, **training, **twins}
+    assert jobs == {**expected, "total": sum(expected.values())}
+    rig_jobs = re.findall(r"rule rig:\n    output: data/raw/(\w+?)_(4inch|8inch)_", out)
+    assert sorted(rig_jobs) == [("newplus", "4inch"), ("newplus", "8inch")]
     assert {m for m in re.findall(r"wildcards: set=(\w+)", out)} == {
         f"newplus_{size}_{res}_{light}" for size in ("4inch", "8inch") for res in ("3x3", "8x8") for light in ("lighton", "lightoff")
     }
@@ -143,3 +154,77 @@ def test_poses_match_the_rig_truth(tiny_run):
     det = pd.read_csv(tiny_run / "results/calibration/detections.csv")
     assert set(det.light) == {"lighton", "lightoff"}
     assert (tiny_run / "results/fig12.png").stat().st_size > 10_000
+
+
+def test_training_tables_and_figures(tiny_run):
+    t5 = pd.read_csv(tiny_run / "results/table5.csv", keep_default_na=False).set_index("split")
+    assert list(t5.index) == ["random", "repeats_grouped", "location_held_out", "shape_held_out", "size_held_out"]
+    assert t5.loc["shape_held_out", "shape_top1"] == "n/a" and t5.loc["size_held_out", "size_accuracy"] == "n/a"
+    assert 0 < float(t5.loc["random", "loc_rmse"]) < 0.5 and 0 <= float(t5.loc["random", "size_accuracy"]) <= 1
+    assert set(t5["protocol"]) == {"clean"}
+    t2 = pd.read_csv(tiny_run / "results/table2.csv").set_index("model")
+    assert list(t2.index) == ["mlp", "cnn1d", "cnn3d", "transformer"]
+    t10 = pd.read_csv(tiny_run / "results/table10.csv").set_index(["model", "task"])
+    assert t10.loc[("cnn1d", "location"), "params"] == 82340  # the paper's count: the 1D CNN does not depend on the bins
+    assert len(t10) == 12 and (t10["train_hours"] > 0).all()
+    for fig in ("fig16", "fig17", "speed_vs_accuracy"):
+        assert (tiny_run / f"results/{fig}.png").stat().st_size > 10_000 and (tiny_run / f"results/{fig}.csv").exists()
+    run = tiny_run / "results/runs/clean/3x3/random/cnn1d_location/seed42"
+    assert {p.name for p in run.iterdir()} == {"metrics.json", "curves.csv", "model.pt"}
+    m = json.loads((run / "metrics.json").read_text())
+    assert m["cell"]["protocol"] == "clean" and m["selected_on"] == "validation" and m["train_samples_per_second"] > 0
+    crop = json.loads((tiny_run / "results/features/crop_3x3.json").read_text())["crop_start"]
+    assert m["input_shape"] == [3, 3, 128 - crop]
+
+
+def test_changing_one_models_hyperparameters_reruns_only_its_cells_and_tables(tiny_run, tmp_path):
+    cfg = tmp_path / "lr.yaml"
+    cfg.write_text("train:\n  hyper:\n    mlp:\n      location: {lr: 0.002}\n")
+    out = snakemake(tiny_run, "-n", "--configfile", "config/presets/tiny.yaml", str(cfg)).stdout
+    jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
+    assert jobs == {"train": 1, "table2": 1, "table10": 1, "speed_vs_accuracy": 1, "all": 1, "total": 5}
+    assert "mlp_location" in out
+
+
+# --- digital twins ---------------------------------------------------------------
+
+
+def test_benchmark_table_and_figure(tiny_run):
+    df = pd.read_csv(tiny_run / "results/render_benchmark.csv").set_index("configuration")
+    assert list(df.index) == ["paper", "paper, footprint pixels", "footprint 100", "footprint 1k", "footprint 5k", "analytic"]
+    assert (df.n_scenes == 4).all() and df.loc["paper", "spp"] == 500
+    assert df.loc["analytic", "error_nl2"] < 0.03
+    assert df.loc["analytic", "time_per_scene_s"] < df.loc["paper", "time_per_scene_s"]
+    assert (tiny_run / "results/render_benchmark.png").stat().st_size > 10_000
+
+
+def test_fig18_and_the_twins_it_uses(tiny_run):
+    data = pd.read_csv(tiny_run / "results/fig18.csv")
+    assert data.groupby(["set", "location"]).size().tolist() == [128, 128]
+    assert (tiny_run / "results/fig18.png").stat().st_size > 50_000
+    twins = sorted((tiny_run / "results/twin").glob("*.zarr"))
+    assert twins
+    for path in twins:
+        t = read_twin(path)
+        assert t.histograms.shape == (12, 128) and (t.histograms.sum(axis=1) > 0).all()
+        name = path.name.removesuffix(".zarr")
+        bench = pd.read_csv(tiny_run / f"benchmarks/twin/{name}.tsv", sep="\t")
+        assert bench.max_rss.max() < 2000  # MB per job
+        assert (tiny_run / f"logs/twin/{name}.log").exists()
+
+
+def test_renderer_settings_rerun_only_what_uses_them(tiny_run, tmp_path):
+    wd = tmp_path / "wd"
+    shutil.copytree(tiny_run, wd, symlinks=True)
+    preset = wd / "config/presets/tiny.yaml"
+    text = preset.read_text()
+    # the analytic twins do not use mitransient's spp; the benchmark does
+    preset.write_text(text + "  mitransient:\n    spp: 1234\n")
+    out = snakemake(wd, "-n", *TARGETS, *TINY).stdout
+    jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
+    assert jobs == {"render_benchmark": 1, "total": 1}
+    # the object albedo changes every twin, so Fig 18 too
+    preset.write_text(text.replace("twin:\n", "twin:\n  object_albedo: 0.6\n"))
+    out = snakemake(wd, "-n", *TARGETS, *TINY).stdout
+    jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
+    assert jobs["twin"] == 2 and jobs["fig18"] == 1 and jobs["render_benchmark"] == 1

@@ -66,6 +66,27 @@ def cmd_index(args: argparse.Namespace) -> None:
     log.info("wrote %s (%d captures from %d sets)", args.out, len(captures), len(args.indexes))
 
 
+def cmd_training_report(args: argparse.Namespace) -> None:
+    from denali_pipe.report.curves import write_curves_figure
+    from denali_pipe.report.speed_accuracy import write_speed_accuracy
+    from denali_pipe.report.table2 import write_table2
+    from denali_pipe.report.table5 import write_table5
+    from denali_pipe.report.table10 import write_table10
+
+    paths, out = [Path(p) for p in args.runs], Path(args.out)
+    if args.kind == "table5":
+        write_table5(paths, out)
+    elif args.kind == "table2":
+        write_table2(paths, out)
+    elif args.kind == "table10":
+        write_table10(paths, out)
+    elif args.kind == "speed-accuracy":
+        write_speed_accuracy(paths, out)
+    else:
+        task = {"fig16": "location", "fig17": "shape"}[args.kind]
+        write_curves_figure(paths, task, args.title, out)
+    log.info("wrote %s from %d cells", out, len(paths))
+
 def cmd_table4(args: argparse.Namespace) -> None:
     from denali_pipe.report.table4 import write_table4
 
@@ -89,26 +110,142 @@ def cmd_calibrate(args: argparse.Namespace) -> None:
     import pandas as pd
 
     from denali_pipe.atomic import atomic_file
-    from denali_pipe.poses.calibrate import calibrate, detection_rates, pool
+    from denali_pipe.poses.calibrate import calibrate
     from denali_pipe.report.fig12 import write_fig12_from_store
     from denali_pipe.report.table6 import write_table6
 
     tables = [pd.read_parquet(p) for p in args.poses]
-    lit = [t for t in tables if (t["light"] == "lighton").all()]
-    if not lit:
-        raise ValueError(f"calibrate: none of the {len(tables)} pose tables is from a light-on set")
-    cal = calibrate(lit)  # the scene is estimated from light-on frames only
+    dark = [p for p, t in zip(args.poses, tables) if not (t["light"] == "lighton").all()]
+    if dark or not tables:
+        raise ValueError(f"calibrate takes light-on pose tables only; got {dark or 'none'}")
+    cal = calibrate(tables)
     outdir = Path(args.outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     with atomic_file(outdir / "tag1_positions.parquet") as tmp:
         cal.object_positions.to_parquet(tmp, index=False)
     with atomic_file(outdir / "scene.json") as tmp:
         tmp.write_text(json.dumps(cal.scene, indent=1, sort_keys=True) + "\n")
-    with atomic_file(outdir / "detections.csv") as tmp:
-        detection_rates(pool(tables)).to_csv(tmp, index=False)  # every lighting
     write_table6(cal.estimates, Path(args.table6))
     write_fig12_from_store(Path(args.figure_store), cal.estimates, cal.filtered, Path(args.fig12))
     log.info("wrote %s, %s, %s", outdir, args.table6, args.fig12)
+
+
+def cmd_detections(args: argparse.Namespace) -> None:
+    import pandas as pd
+
+    from denali_pipe.atomic import atomic_file
+    from denali_pipe.poses.calibrate import detection_rates, pool
+
+    with atomic_file(Path(args.out)) as tmp:
+        detection_rates(pool([pd.read_parquet(p) for p in args.poses])).to_csv(tmp, index=False)
+    log.info("wrote %s", args.out)
+
+
+def cmd_crop_window(args: argparse.Namespace) -> None:
+    import json
+
+    from denali_pipe.atomic import atomic_file
+    from denali_pipe.io.store import open_set
+    from denali_pipe.preprocess import DIRECT_END_FRACTION, crop_window
+
+    stores = [open_set(Path(p)) for p in args.backgrounds]
+    start = crop_window([s.histograms[...] for s in stores])
+    record = {"crop_start": start, "direct_end_fraction": DIRECT_END_FRACTION, "backgrounds": [s.name for s in stores]}
+    with atomic_file(Path(args.out)) as tmp:
+        tmp.write_text(json.dumps(record, indent=1) + "\n")
+    log.info("wrote %s: first kept bin %d", args.out, start)
+
+
+def cmd_preprocess(args: argparse.Namespace) -> None:
+    import json
+
+    from denali_pipe.io.features import write_features
+    from denali_pipe.io.store import open_set
+    from denali_pipe.preprocess import preprocess
+
+    store, bg = open_set(Path(args.store)), open_set(Path(args.background))
+    crop = json.loads(Path(args.crop).read_text())["crop_start"]
+    try:
+        feats = preprocess(store.histograms[...], store.locations, bg.histograms[...], bg.locations, crop)
+    except ValueError as e:
+        raise ValueError(f"{args.store} (background {args.background}): {e}") from None
+    write_features(Path(args.out), store.capture_set, feats, bg.name)
+    log.info("wrote %s: %s from bin %d, shifts %s", args.out, feats.values.shape, crop, sorted(set(feats.shifts.ravel().tolist())))
+
+
+def cmd_dataset(args: argparse.Namespace) -> None:
+    import pandas as pd
+
+    from denali_pipe.dataset import build_dataset, location_labels, write_dataset
+    from denali_pipe.io.features import read_features
+    from denali_pipe.objects import load_catalogue
+
+    x, samples = build_dataset([Path(p) for p in args.features], load_catalogue(args.objects_sheet), location_labels(pd.read_parquet(args.positions)))
+    write_dataset(x, samples, Path(args.out), Path(args.table), read_features(Path(args.features[0]))[1].crop_start)
+    log.info("wrote %s %s and %s", args.out, x.shape, args.table)
+
+
+def cmd_train(args: argparse.Namespace) -> None:
+    import json
+
+    import torch
+
+    from denali_pipe.atomic import atomic_dir
+    from denali_pipe.cells import LINEAR
+    from denali_pipe.classical import run_linear
+    from denali_pipe.dataset import read_dataset
+    from denali_pipe.train import Cell, Hyper, run_cell
+
+    torch.set_num_threads(args.threads)
+    x, samples, _ = read_dataset(Path(args.dataset), Path(args.table))
+    cell = Cell(**args.cell)
+    if cell.model == LINEAR:
+        result = run_linear(x, samples, cell, args.validation_fraction)
+    else:
+        device = "cuda" if torch.cuda.is_available() else "cpu"
+        result = run_cell(x, samples, cell, Hyper(**args.hyper), args.validation_fraction, device, args.budget_seconds)
+    with atomic_dir(Path(args.outdir)) as tmp:
+        (tmp / "metrics.json").write_text(json.dumps(result.metrics, indent=1) + "\n")
+        result.curves.to_csv(tmp / "curves.csv", index=False)
+        torch.save(result.state, tmp / "model.pt")
+    m = result.metrics
+    log.info("wrote %s: test %s, %.1f s training (%.0f samples/s)", args.outdir, m["test"], m["train_seconds"], m["train_samples_per_second"])
+
+
+def cmd_render(args: argparse.Namespace) -> None:
+    from denali_pipe.objects import spec_from_dict
+    from denali_pipe.twin.render import render_twin
+
+    missing = {"seed", "twin"} - set(args.config)
+    if missing:
+        raise ValueError(f"--config lacks the keys {sorted(missing)}")
+    render_twin(spec_from_dict(args.object), args.size, Path(args.scene), args.config, Path(args.out))
+    log.info("wrote %s", args.out)
+
+
+def cmd_render_benchmark(args: argparse.Namespace) -> None:
+    from denali_pipe.objects import spec_from_dict
+    from denali_pipe.report.render_benchmark import plot_render_benchmark
+    from denali_pipe.twin.benchmark import run_benchmark
+    from denali_pipe.twin.layout import load_calibration
+
+    missing = {"seed", "sizes", "twin"} - set(args.config)
+    if missing:
+        raise ValueError(f"--config lacks the keys {sorted(missing)}")
+    specs = [spec_from_dict(d) for d in args.objects]
+    summary, _ = run_benchmark(load_calibration(Path(args.scene)), specs, args.config["sizes"], args.config["twin"], args.config["seed"])
+    plot_render_benchmark(summary, Path(args.out))
+    log.info("wrote %s and its CSV:\n%s", args.out, summary.to_string(index=False))
+
+
+def cmd_fig18(args: argparse.Namespace) -> None:
+    from denali_pipe.report.fig18 import fig18
+
+    if not len(args.sets) == len(args.backgrounds) == len(args.twins):
+        raise ValueError(f"fig18: {len(args.sets)} sets, {len(args.backgrounds)} backgrounds and {len(args.twins)} twins; expected one of each per row")
+    captures = [(Path(a), Path(b), Path(c)) for a, b, c in zip(args.sets, args.backgrounds, args.twins)]
+    fig18(captures, Path(args.scene), args.config, Path(args.out))
+    log.info("wrote %s", args.out)
 
 
 def cmd_rig_examples(args: argparse.Namespace) -> None:
@@ -143,6 +280,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="output captures.parquet")
     s.set_defaults(func=cmd_index)
 
+    s = sub.add_parser("report", help="a training table or figure from cells' metrics.json / curves.csv")
+    s.add_argument("kind", choices=["table2", "table5", "table10", "fig16", "fig17", "speed-accuracy"])
+    s.add_argument("runs", nargs="+", help="metrics.json files (curves.csv for fig16/fig17)")
+    s.add_argument("--title", default="", help="figure title (fig16/fig17)")
+    s.add_argument("--out", required=True, help="output CSV or PNG (a PNG gets its data beside it as CSV)")
+    s.set_defaults(func=cmd_training_report)
+
     s = sub.add_parser("table4", help="on-disk size per modality and resolution (Table 4)")
     s.add_argument("stores", nargs="+", help="capture-set Zarr stores")
     s.add_argument("--out", required=True, help="output table4.csv")
@@ -154,12 +298,72 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_poses)
 
     s = sub.add_parser("calibrate", help="world frame, filtered tag positions, scene.json, Table 6, Fig 12")
-    s.add_argument("poses", nargs="+", help="per-set pose tables (light-on ones calibrate; all count for detection rates)")
+    s.add_argument("poses", nargs="+", help="per-set pose tables of the light-on sets")
     s.add_argument("--figure-store", required=True, help="the light-on store whose first frame Fig 12 shows")
-    s.add_argument("--outdir", required=True, help="results/calibration: tag1_positions.parquet, scene.json, detections.csv")
+    s.add_argument("--outdir", required=True, help="results/calibration: tag1_positions.parquet, scene.json")
     s.add_argument("--table6", required=True, help="output table6.csv")
     s.add_argument("--fig12", required=True, help="output fig12.png (its data beside it as CSV)")
     s.set_defaults(func=cmd_calibrate)
+
+    s = sub.add_parser("detections", help="AprilTag detection rates per tag and lighting")
+    s.add_argument("poses", nargs="+", help="per-set pose tables (every lighting)")
+    s.add_argument("--out", required=True, help="output detections.csv")
+    s.set_defaults(func=cmd_detections)
+
+    s = sub.add_parser("crop-window", help="first histogram bin after the direct return, from background sets")
+    s.add_argument("backgrounds", nargs="+", help="NOOBJECT stores of one resolution")
+    s.add_argument("--out", required=True, help="output crop_<res>.json")
+    s.set_defaults(func=cmd_crop_window)
+
+    s = sub.add_parser("preprocess", help="align, subtract the background and crop one capture set")
+    s.add_argument("store", help="the set's <set>.zarr")
+    s.add_argument("--background", required=True, help="the matching NOOBJECT store")
+    s.add_argument("--crop", required=True, help="crop_<res>.json from crop-window")
+    s.add_argument("--out", required=True, help="output features/<set>.zarr")
+    s.set_defaults(func=cmd_preprocess)
+
+    s = sub.add_parser("dataset", help="stack base-object features and location labels into the benchmark samples")
+    s.add_argument("features", nargs="+", help="features/<set>.zarr of one resolution")
+    s.add_argument("--positions", required=True, help="calibration/tag1_positions.parquet (location labels)")
+    s.add_argument("--objects-sheet", required=True, help="objects.tsv")
+    s.add_argument("--out", required=True, help="output datasets/<res>.zarr (array x)")
+    s.add_argument("--table", required=True, help="output datasets/<res>.parquet (one row per sample)")
+    s.set_defaults(func=cmd_dataset)
+
+    s = sub.add_parser("train", help="train and evaluate one cell (model x task x split x resolution x protocol x seed)")
+    s.add_argument("dataset", help="datasets/<res>.zarr")
+    s.add_argument("--table", required=True, help="datasets/<res>.parquet")
+    s.add_argument("--cell", type=_json, required=True, help='JSON {"model", "task", "split", "resolution", "protocol", "seed"}')
+    s.add_argument("--hyper", type=_json, required=True, help='JSON {"lr", "epochs", "batch_size", "norm"} ({} for the linear model)')
+    s.add_argument("--validation-fraction", type=float, required=True, help="validation share of the training split (clean protocol)")
+    s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    s.add_argument("--budget-seconds", type=float, default=None, help="stop a network's training after this much training time")
+    s.add_argument("--outdir", required=True, help="output run folder: metrics.json, curves.csv, model.pt")
+    s.set_defaults(func=cmd_train)
+
+    s = sub.add_parser("render", help="render one object and size's digital twin at every calibrated location")
+    s.add_argument("scene", help="results/calibration/scene.json")
+    s.add_argument("--object", type=_json, required=True, help="the object's sheet row as JSON")
+    s.add_argument("--size", required=True, choices=["4inch", "8inch"], help="object size")
+    s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "twin": {...}}')
+    s.add_argument("--out", required=True, help="output results/twin/<object>_<size>.zarr")
+    s.set_defaults(func=cmd_render)
+
+    s = sub.add_parser("render-benchmark", help="twin renderers' time per scene against error to a converged reference")
+    s.add_argument("scene", help="results/calibration/scene.json")
+    s.add_argument("--objects", type=_json, required=True, help="JSON list of the objects' sheet rows to draw scenes from")
+    s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "sizes": [...], "twin": {...}}')
+    s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
+    s.set_defaults(func=cmd_render_benchmark)
+
+    s = sub.add_parser("fig18", help="Fig 18: tracking frames, twin renders and real vs simulated centre-pixel histograms")
+    s.add_argument("scene", help="results/calibration/scene.json")
+    s.add_argument("--sets", nargs="+", required=True, help="light-on 3x3 capture-set stores, one per row")
+    s.add_argument("--backgrounds", nargs="+", required=True, help="the matching NOOBJECT stores, in the same order")
+    s.add_argument("--twins", nargs="+", required=True, help="the matching twin stores (results/twin/<object>_<size>.zarr)")
+    s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "variant": ..., "fig18": {...}}')
+    s.add_argument("--out", required=True, help="PNG path; the plotted data goes beside it as CSV")
+    s.set_defaults(func=cmd_fig18)
 
     s = sub.add_parser("rig-examples", help="plot example histograms with the three-bounce bump marked")
     s.add_argument("--sets", nargs="+", required=True, help="object capture-set stores (<set>.zarr)")

@@ -1,0 +1,50 @@
+# Preprocessing: the crop window per resolution (from the background sets),
+# then one job per object capture set (align, subtract its NOOBJECT set,
+# crop), then the benchmark's samples per resolution.
+
+
+rule crop_window:
+    input:
+        lambda w: [store(s.name) for s in SETS if s.object == "NOOBJECT" and s.resolution == w.res],
+    output:
+        "results/features/crop_{res}.json",
+    log:
+        "logs/features/crop_{res}.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali crop-window {input} --out {output} > {log} 2>&1"
+
+
+rule preprocess:
+    input:
+        store=store("{set}"),
+        background=background_store,
+        crop=lambda w: f"results/features/crop_{parse_set_name(w.set).resolution}.json",
+    output:
+        directory("results/features/{set}.zarr"),
+    log:
+        "logs/features/{set}.log",
+    benchmark:
+        "benchmarks/preprocess/{set}.tsv"
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali preprocess {input.store} --background {input.background} --crop {input.crop} --out {output} > {log} 2>&1"
+
+
+rule dataset:
+    input:
+        features=lambda w: [f"results/features/{name}.zarr" for name in benchmark_sets(w.res)],
+        positions="results/calibration/tag1_positions.parquet",
+        sheet=config["objects_sheet"],
+    output:
+        x=directory("results/datasets/{res}.zarr"),
+        table="results/datasets/{res}.parquet",
+    log:
+        "logs/datasets/{res}.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali dataset {input.features} --positions {input.positions} --objects-sheet {input.sheet}"
+        " --out {output.x} --table {output.table} > {log} 2>&1"

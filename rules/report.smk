@@ -1,0 +1,71 @@
+# Training tables and figures: aggregates over the training cells.
+CURVE_TASK = {"fig16": "location", "fig17": "shape"}
+
+
+rule table5:
+    input:
+        run_files(["cnn1d"], TASKS, SPLITS),
+    output:
+        "results/table5.csv",
+    log:
+        "logs/report/table5.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali report table5 {input} --out {output} > {log} 2>&1"
+
+
+rule table2:
+    input:
+        run_files(MODELS, TASKS, ["random"]),
+    output:
+        "results/table2.csv",
+    log:
+        "logs/report/table2.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali report table2 {input} --out {output} > {log} 2>&1"
+
+
+rule table10:
+    input:
+        run_files(MODELS, TASKS, ["random"]),
+    output:
+        "results/table10.csv",
+    log:
+        "logs/report/table10.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali report table10 {input} --out {output} > {log} 2>&1"
+
+
+rule speed_vs_accuracy:
+    input:
+        run_files([*MODELS, LINEAR], TASKS, ["random"]),
+    output:
+        "results/speed_vs_accuracy.png",
+    log:
+        "logs/report/speed_vs_accuracy.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali report speed-accuracy {input} --out {output} > {log} 2>&1"
+
+
+rule training_curves:
+    input:
+        lambda w: run_files(["cnn1d"], [CURVE_TASK[w.fig]], ["random"], "curves.csv"),
+    output:
+        "results/{fig}.png",
+    params:
+        title=lambda w: shlex.quote(f"1D CNN {CURVE_TASK[w.fig]} training curves ({TRAIN['resolution']}, random split, {TRAIN['protocol']} protocol)"),
+    wildcard_constraints:
+        fig="fig16|fig17",
+    log:
+        "logs/report/{fig}.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali report {wildcards.fig} {input} --title {params.title} --out {output} > {log} 2>&1"

@@ -1,0 +1,29 @@
+# Training cells: one job per model x task x split x resolution x protocol x seed.
+# A cell gets only its own settings as JSON, so changing one model's
+# hyperparameters reruns only that model's cells and the tables.
+
+
+rule train:
+    input:
+        x="results/datasets/{res}.zarr",
+        table="results/datasets/{res}.parquet",
+    output:
+        metrics=f"{RUN_DIR}/metrics.json",
+        curves=f"{RUN_DIR}/curves.csv",
+        model=f"{RUN_DIR}/model.pt",
+    params:
+        cell=cell_arg,
+        hyper=hyper_arg,
+        outdir=lambda w, output: Path(output.metrics).parent,
+        validation=config["train"]["validation_fraction"],
+        budget=budget_arg,
+    threads: config["train"]["threads"]
+    log:
+        f"logs/{RUN_DIR}.log",
+    benchmark:
+        f"benchmarks/{RUN_DIR}.tsv"
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali train {input.x} --table {input.table} --cell {params.cell} --hyper {params.hyper}"
+        " --validation-fraction {params.validation} {params.budget} --threads {threads} --outdir {params.outdir} > {log} 2>&1"

@@ -1,0 +1,80 @@
+# Digital twins: one job per object and size rendering every calibrated
+# location, the renderers' cost vs fidelity benchmark, and Fig 18.
+
+from types import SimpleNamespace
+
+from denali_pipe.twin.selection import fig18_sets, twin_pairs
+
+TWIN_PAIRS = twin_pairs(CATALOGUE, config)
+# every twin store (for `rule all`)
+TWINS = [f"results/twin/{name}_{size}.zarr" for name, size in TWIN_PAIRS]
+TWIN_MESHES = [f for name, size in TWIN_PAIRS for f in rig_mesh_files(SimpleNamespace(object=name, size=size))]
+# A twin job gets the scene settings and its renderer's own section only, so
+# that e.g. mitransient's spp reruns no analytic twin.
+TWIN = config["twin"]
+TWIN_JOB_CONFIG = json.dumps(
+    {"seed": config["seed"], "twin": {**{k: TWIN[k] for k in ("renderer", "wall_albedo", "object_albedo", "table", "table_albedo", "footprint")}, TWIN["renderer"]: TWIN[TWIN["renderer"]]}},
+    sort_keys=True,
+)
+# Fig 18's captures are drawn when the rule is needed (input functions), so a
+# config without light-on 3x3 sets fails only when Fig 18 is asked for.
+FIG18 = lambda: fig18_sets(SETS, TWIN["fig18"]["n_captures"], config["seed"])
+
+
+rule twin:
+    input:
+        scene="results/calibration/scene.json",
+        meshes=rig_mesh_files,
+    output:
+        directory("results/twin/{object}_{size}.zarr"),
+    params:
+        object=rig_object_arg,
+        config=TWIN_JOB_CONFIG,
+    log:
+        "logs/twin/{object}_{size}.log",
+    benchmark:
+        "benchmarks/twin/{object}_{size}.tsv"
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali render {input.scene} {params.object} --size {wildcards.size} --config {params.config:q} --out {output} > {log} 2>&1"
+
+
+rule render_benchmark:
+    input:
+        scene="results/calibration/scene.json",
+        meshes=TWIN_MESHES,
+    output:
+        png="results/render_benchmark.png",
+        csv="results/render_benchmark.csv",
+    params:
+        objects=json.dumps(sorted((CATALOGUE[name].to_dict() for name in dict.fromkeys(n for n, _ in TWIN_PAIRS)), key=lambda d: d["name"]), sort_keys=True),
+        config=json.dumps({"seed": config["seed"], "sizes": config["sizes"], "twin": {k: v for k, v in TWIN.items() if k not in ("renderer", "fig18")}}, sort_keys=True),
+    log:
+        "logs/render_benchmark.log",
+    benchmark:
+        "benchmarks/render_benchmark.tsv"
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali render-benchmark {input.scene} --objects {params.objects:q} --config {params.config:q} --out {output.png} > {log} 2>&1"
+
+
+rule fig18:
+    input:
+        scene="results/calibration/scene.json",
+        sets=lambda w: [store(s.name) for s in FIG18()],
+        backgrounds=lambda w: [store(background_of(s).name) for s in FIG18()],
+        twins=lambda w: [f"results/twin/{s.object}_{s.size}.zarr" for s in FIG18()],
+    output:
+        png="results/fig18.png",
+        csv="results/fig18.csv",
+    params:
+        config=json.dumps({"seed": config["seed"], "variant": TWIN["mitransient"]["variant"], "fig18": TWIN["fig18"]}, sort_keys=True),
+    log:
+        "logs/fig18.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali fig18 {input.scene} --sets {input.sets} --backgrounds {input.backgrounds} --twins {input.twins}"
+        " --config {params.config:q} --out {output.png} > {log} 2>&1"
