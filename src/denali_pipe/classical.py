@@ -17,7 +17,7 @@ import pandas as pd
 from sklearn.linear_model import LogisticRegression, Ridge
 
 from denali_pipe.preprocess import normalise
-from denali_pipe.train import Cell, Result, _rows, baseline_metrics, partition, selection_key, targets, task_metrics
+from denali_pipe.train import Cell, Result, baseline_metrics, metric_rows, partition, selection_key, targets, task_metrics
 
 # Ridge alpha / inverse logistic C, on z-scored log histograms.
 REGULARISATION = (0.1, 1.0, 10.0, 100.0)
@@ -57,7 +57,7 @@ def run_linear(x: np.ndarray, samples: pd.DataFrame, cell: Cell, validation_frac
         model = _fit(cell.task, strength, xf[split.train], y[split.train])
         train_seconds += time.perf_counter() - t0
         sel = task_metrics(cell.task, _scores(cell.task, model, xf[sel_rows], n_classes), y[sel_rows])
-        rows += _rows(i, sel_name, sel)
+        rows += metric_rows(i, sel_name, sel)
         if sign * sel[metric] > best[0]:
             best = (sign * sel[metric], strength, model)
 

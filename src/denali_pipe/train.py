@@ -168,9 +168,9 @@ def run_cell(x: np.ndarray, samples: pd.DataFrame, cell: Cell, hp: Hyper, valida
         train_seconds += time.perf_counter() - t0
         # training metrics from the epoch's own (train-mode) outputs: free, as the paper's curves
         idx = torch.cat([i for i, _ in outs]).numpy()
-        rows += _rows(epoch, "train", task_metrics(cell.task, torch.cat([o for _, o in outs]).numpy(), y[split.train][idx]))
+        rows += metric_rows(epoch, "train", task_metrics(cell.task, torch.cat([o for _, o in outs]).numpy(), y[split.train][idx]))
         sel = task_metrics(cell.task, _evaluate(model, x_sel, dev), y_sel)
-        rows += _rows(epoch, select_on[0], sel)
+        rows += metric_rows(epoch, select_on[0], sel)
         if sign * sel[metric] > best[0]:
             best = (sign * sel[metric], epoch, copy.deepcopy(model.state_dict()))
         if over_budget:
@@ -182,7 +182,7 @@ def run_cell(x: np.ndarray, samples: pd.DataFrame, cell: Cell, hp: Hyper, valida
     infer_seconds = time.perf_counter() - t0
     test = task_metrics(cell.task, test_out, y[split.test])
     if val is not None:
-        rows += _rows(best[1], "test", test)
+        rows += metric_rows(best[1], "test", test)
 
     result = {
         "cell": asdict(cell),
@@ -213,5 +213,5 @@ def run_cell(x: np.ndarray, samples: pd.DataFrame, cell: Cell, hp: Hyper, valida
     return Result(result, pd.DataFrame(rows, columns=["epoch", "part", "metric", "value"]), state)
 
 
-def _rows(epoch: int, part: str, values: dict) -> list[tuple]:
+def metric_rows(epoch: int, part: str, values: dict) -> list[tuple]:
     return [(epoch, part, k, float(v)) for k, v in values.items()]

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 CELL_COLUMNS = ("model", "task", "split", "resolution", "protocol")
@@ -95,7 +94,3 @@ def protocol_of(runs: pd.DataFrame) -> str:
     if len(protocols) != 1:
         raise ValueError(f"a table shows one protocol; the cells mix {protocols}")
     return protocols[0]
-
-
-def finite(x) -> bool:
-    return x is not None and np.isfinite(x)
