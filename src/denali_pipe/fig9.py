@@ -1,0 +1,125 @@
+"""Fig 9 (paper supplement §11.5.2): sim-to-real transfer of a 1D CNN localiser.
+
+For each fidelity of the simulated histograms (`transforms.FIDELITIES`: raw
+twins, scaled, scaled+blurred, scaled+blurred+noisy) and each number of real
+samples n (e.g. 0, 10, 50, 100, 200), a fresh 1D CNN learns the object's
+(x, y) from centre-pixel histograms: the twins of the training captures at
+that fidelity plus n real samples, for a fixed number of epochs (no model
+selection, as the paper). Every model is scored on the same held-out real
+test split: all repeats of the test captures (`transforms.split_pairs`, the
+split the transforms were fitted on, so they never saw a test capture).
+
+Per seed: the model's initialisation and batch order, the draw of real
+samples (one permutation of the training captures' repeats, its first n, so
+the sets are nested as n grows) and the noise draws. Every model of one seed
+starts from the same weights, so the curves differ by their data alone.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+import pandas as pd
+import torch
+from torch import nn
+
+from denali_pipe.metrics import regression_metrics
+from denali_pipe.models import build_model
+from denali_pipe.preprocess import normalise
+from denali_pipe.seeds import derive_seed, rng_for
+from denali_pipe.train import EVAL_BATCH, Hyper
+from denali_pipe.transforms import FIDELITIES, Pairs, Transforms, apply, split_pairs
+
+log = logging.getLogger(__name__)
+
+
+def sim_samples(pairs: Pairs, y: np.ndarray, t: Transforms, fidelity: str, copies: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Simulated training samples: each twin of `pairs` `copies` times at
+    `fidelity`, in the real bins. Deterministic fidelities repeat the same
+    histogram; the noisy one draws fresh noise per copy, so every fidelity
+    trains on the same number of samples. Returns x (copies N, T) float32,
+    y (copies N, 2) metres."""
+    rng = rng_for(seed, "fig9", "noise")
+    x = np.concatenate([pairs.crop(apply(pairs.sim, t, fidelity, rng)) for _ in range(copies)])
+    return x, np.tile(y, (copies, 1))
+
+
+def real_samples(pairs: Pairs, y: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The first `n` of one seeded permutation of every (capture, repeat) of
+    `pairs`: x (n, T) counts, y (n, 2) metres, and their (pair row, repeat)
+    indices (n, 2). ValueError if fewer than n exist."""
+    N, R, _ = pairs.real.shape
+    if n > N * R:
+        raise ValueError(f"fig9: {n} real samples asked for, but the training captures hold only {N * R} ({N} captures x {R} repeats)")
+    flat = rng_for(seed, "fig9", "real").permutation(N * R)[:n]
+    rows, reps = np.divmod(flat, R)
+    return pairs.real[rows, reps], y[rows], np.stack([rows, reps], axis=1)
+
+
+def train_localiser(x: np.ndarray, y: np.ndarray, hp: Hyper, seed: int) -> tuple[nn.Module, tuple | None]:
+    """A fresh 1D CNN (location, one zone) trained on x (N, T), y (N, 2) for
+    hp.epochs: Adam at hp.lr, summed MSE on metres, batches of hp.batch_size
+    in a seeded order (as `train.run_cell`). Returns the model and its
+    normalisation statistics (`preprocess.normalise`, from x)."""
+    torch.manual_seed(seed)
+    xn, stats = normalise(x, hp.norm)
+    xt = torch.from_numpy(np.ascontiguousarray(xn[:, None, None, :]))
+    yt = torch.from_numpy(np.ascontiguousarray(y, np.float32))
+    model = build_model("cnn1d", "location", n=1, bins=x.shape[-1], n_classes=2)
+    opt = torch.optim.Adam(model.parameters(), lr=hp.lr)
+    loss_fn = nn.MSELoss(reduction="sum")
+    gen = torch.Generator().manual_seed(seed)
+    model.train()
+    for _ in range(hp.epochs):
+        order = torch.randperm(len(xt), generator=gen)
+        for i in range(0, len(order), hp.batch_size):
+            idx = order[i : i + hp.batch_size]
+            if len(idx) < 2:  # BatchNorm needs two samples to train on
+                continue
+            opt.zero_grad(set_to_none=True)
+            loss_fn(model(xt[idx]), yt[idx]).backward()
+            opt.step()
+    return model, stats
+
+
+def predict(model: nn.Module, stats: tuple | None, x: np.ndarray, norm: str) -> np.ndarray:
+    """(N, 2) predicted positions (m) of x (N, T) counts."""
+    xn = torch.from_numpy(np.ascontiguousarray(normalise(x, norm, stats)[0][:, None, None, :]))
+    model.eval()
+    with torch.no_grad():
+        return torch.cat([model(xn[i : i + EVAL_BATCH]) for i in range(0, len(xn), EVAL_BATCH)]).numpy()
+
+
+def run_fig9(pairs: Pairs, labels: np.ndarray, t: Transforms, settings: dict, hp: Hyper, split_seed: int) -> pd.DataFrame:
+    """Every (fidelity, n real, seed) model of Fig 9 and its test metrics.
+
+    pairs: every real capture with its twin; labels: (N, 2) the true (x, y)
+    of each pair, metres; t: the fitted transforms; settings: the `fit`
+    config section (test_fraction, fig9: real_samples, seeds, sim_copies);
+    hp: Adam/batch/normalisation settings and epochs; split_seed: the seed of
+    the real train/test split (the transforms' split).
+
+    Returns one row per model: fidelity, n_real, seed, n_sim, n_test, then
+    `metrics.regression_metrics` on the real test samples (m, m^2)."""
+    if len(labels) != len(pairs.real):
+        raise ValueError(f"fig9: {len(labels)} labels for {len(pairs.real)} pairs")
+    f9 = settings["fig9"]
+    split = split_pairs(pairs.keys, split_seed, settings["test_fraction"])
+    train, test = pairs.subset(split.train), pairs.subset(split.test)
+    y_train, y_test = labels[split.train], labels[split.test]
+    x_test = test.real.reshape(-1, test.bins)
+    y_test = np.repeat(y_test, test.real.shape[1], axis=0)
+    rows = []
+    for seed in f9["seeds"]:
+        for fidelity in FIDELITIES:
+            x_sim, y_sim = sim_samples(train, y_train, t, fidelity, f9["sim_copies"], seed)
+            for n_real in f9["real_samples"]:
+                x_real, y_real, _ = real_samples(train, y_train, n_real, seed)
+                t0 = time.perf_counter()
+                model, stats = train_localiser(np.concatenate([x_sim, x_real]), np.concatenate([y_sim, y_real]), hp, derive_seed(seed, "fig9", "model") % 2**31)
+                m = regression_metrics(predict(model, stats, x_test, hp.norm), y_test)
+                log.info("fig9 seed %d %s + %d real: test RMSE %.4f m (%.1f s)", seed, fidelity, n_real, m["rmse"], time.perf_counter() - t0)
+                rows.append({"fidelity": fidelity, "n_real": n_real, "seed": seed, "n_sim": len(x_sim), "n_test": len(x_test), **m})
+    return pd.DataFrame(rows)

@@ -1,0 +1,227 @@
+"""Sim-to-real transforms: recovery of known transforms, stability on degenerate input, pairing."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from denali_pipe import geometry as geo
+from denali_pipe.capture_sets import parse_set_name
+from denali_pipe.io.features import write_features
+from denali_pipe.preprocess import Features
+from denali_pipe.transforms import (
+    FIDELITIES,
+    KERNEL_BINS,
+    Pairs,
+    Transforms,
+    add_noise,
+    apply,
+    blur,
+    build_pairs,
+    fit_transforms,
+    read_transforms,
+    scale,
+    split_pairs,
+    write_transforms,
+)
+from denali_pipe.twin.render import write_twin
+
+CROP, T, R = 77, 51, 3
+MIN_FRACTION = 0.02
+
+
+def rendered_like(n: int, rng: np.random.Generator) -> np.ndarray:
+    """(n, N_BINS) twin-like transients: a sharp rise at bins 74-100 (some
+    before the crop, as the twin's), an exponential fall of 1-3 bins, peaks
+    log-uniform over 1e-3..3e-2 (radiance)."""
+    b = np.arange(geo.N_BINS)
+    pos = rng.uniform(74, 100, n)[:, None]
+    amp = np.exp(rng.uniform(np.log(1e-3), np.log(3e-2), n))[:, None]
+    width = rng.uniform(1.0, 3.0, n)[:, None]
+    shape = np.where(b >= pos, np.exp(-(b - pos) / width), np.exp(-(((b - pos) / 0.7) ** 2)))
+    return (amp * shape).astype(np.float32)
+
+
+def pairs_of(real: np.ndarray, sim: np.ndarray) -> Pairs:
+    n = len(real)
+    keys = pd.DataFrame({"set": ["A_8inch_3x3_lighton"] * n, "object": "A", "size": "8inch", "location": np.arange(n)})
+    return Pairs(np.asarray(real, np.float32), np.asarray(sim, np.float32), keys, CROP)
+
+
+def assert_finite(t: Transforms) -> None:
+    values = [t.a, t.gamma, *t.kernel, t.a_noise, t.b_noise]
+    assert np.all(np.isfinite(values)), t
+    assert t.a > 0 and t.gamma > 0 and t.a_noise >= 1 and t.b_noise >= 0, t
+    assert np.min(t.kernel) >= 0 and abs(sum(t.kernel) - 1) < 1e-9, t
+
+
+# --- recovery -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("a,gamma", [(2e5, 1.2), (1e4, 0.8)])
+def test_recovers_known_transforms(a, gamma):
+    """Known scale, a delayed Gaussian pulse kernel and Poisson-Gaussian noise
+    applied to 800 twin-like transients (3 repeats each; peaks of ~40 to
+    ~3,000 counts over a noise floor of variance 100) are fitted back."""
+    rng = np.random.default_rng(0)
+    sim = rendered_like(800, rng)
+    kernel = np.exp(-0.5 * ((np.arange(KERNEL_BINS) - 7) / 1.2) ** 2)  # 2 bins late, like the twin's offset
+    truth = Transforms(a, gamma, tuple(kernel / kernel.sum()), 1.5, 100.0)
+    mu = apply(sim, truth, "blurred")
+    real = np.stack([add_noise(mu, truth.a_noise, truth.b_noise, rng) for _ in range(R)], axis=1)[..., CROP : CROP + T]
+    fit = fit_transforms(pairs_of(real, sim), MIN_FRACTION)
+    assert fit.a == pytest.approx(truth.a, rel=0.02)
+    assert fit.gamma == pytest.approx(truth.gamma, rel=0.02)
+    assert np.abs(np.array(fit.kernel) - truth.kernel).sum() <= 0.05
+    assert fit.a_noise == pytest.approx(truth.a_noise, rel=0.10)
+    assert fit.b_noise == pytest.approx(truth.b_noise, rel=0.10)
+
+
+def test_noise_draw_has_the_modelled_mean_and_variance():
+    mu = np.full(200_000, 40.0)
+    x = add_noise(mu, 2.0, 30.0, np.random.default_rng(1))
+    assert x.mean() == pytest.approx(40.0, abs=0.1)
+    assert x.var() == pytest.approx(2.0 * 40 + 30, rel=0.02)
+
+
+def test_blur_is_a_centred_convolution():
+    h = np.zeros((1, 20), np.float32)
+    h[0, 10] = 1.0
+    k = np.zeros(KERNEL_BINS)
+    k[KERNEL_BINS // 2 + 2] = 1.0  # a delay of 2 bins
+    assert np.flatnonzero(blur(h, k)[0]).tolist() == [12]
+
+
+def test_apply_fidelities():
+    t = Transforms(10.0, 1.0, tuple(np.eye(KERNEL_BINS)[KERNEL_BINS // 2]), 1.0, 0.0)
+    sim = rendered_like(3, np.random.default_rng(2))
+    assert np.array_equal(apply(sim, t, "raw"), sim)
+    assert np.allclose(apply(sim, t, "scaled"), 10 * sim)
+    assert np.allclose(apply(sim, t, "blurred"), 10 * sim, atol=1e-6)
+    assert apply(sim, t, "noisy", np.random.default_rng(0)).shape == sim.shape
+    with pytest.raises(ValueError, match="random generator"):
+        apply(sim, t, "noisy")
+    with pytest.raises(ValueError, match="unknown fidelity"):
+        apply(sim, t, "perfect")
+
+
+# --- stability: never NaN or inf ----------------------------------------------------------
+
+
+def noisy_pairs(n: int = 60, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    sim = rendered_like(n, rng)
+    mu = scale(sim, 2e4, 1.0)
+    real = mu[:, None, CROP : CROP + T] + rng.normal(0, 5, (n, R, T))
+    return real, sim
+
+
+def test_stability_empty_histograms():
+    """Twins and captures without any signal (all zeros) among normal pairs."""
+    real, sim = noisy_pairs()
+    real[:20], sim[:20] = 0.0, 0.0
+    t = fit_transforms(pairs_of(real, sim), MIN_FRACTION)
+    assert_finite(t)
+    for f in FIDELITIES:
+        assert np.isfinite(apply(np.zeros((2, geo.N_BINS), np.float32), t, f, np.random.default_rng(0))).all()
+    with pytest.raises(ValueError, match="no pairs"):
+        fit_transforms(pairs_of(np.zeros((0, R, T)), np.zeros((0, geo.N_BINS))), MIN_FRACTION)
+    with pytest.raises(ValueError, match="no pair has a positive simulated bin"):
+        fit_transforms(pairs_of(np.zeros((5, R, T)), np.zeros((5, geo.N_BINS))), MIN_FRACTION)
+
+
+def test_stability_all_zero_bins():
+    """Twins that are exactly zero outside their bump (log 0 must never be taken)."""
+    real, sim = noisy_pairs()
+    sim[sim < 0.2 * sim.max(axis=1, keepdims=True)] = 0.0
+    t = fit_transforms(pairs_of(real, sim), MIN_FRACTION)
+    assert_finite(t)
+    assert t.gamma == pytest.approx(1.0, abs=0.2)
+
+
+def test_stability_negative_values():
+    """Background subtraction leaves negative counts; a negative twin bin counts as 0."""
+    real, sim = noisy_pairs()
+    real -= 8.0
+    sim[:, :CROP] = -1e-3
+    t = fit_transforms(pairs_of(real, sim), MIN_FRACTION)
+    assert_finite(t)
+    assert np.isfinite(apply(sim, t, "noisy", np.random.default_rng(0))).all()
+
+
+def test_stability_constant_inputs():
+    """Identical constant twins and noiseless constant captures: gamma is not
+    identified (it stays 1), the variance is zero (b_noise 0, a_noise 1)."""
+    sim = np.full((30, geo.N_BINS), 1e-3, np.float32)
+    real = np.full((30, R, T), 20.0, np.float32)
+    t = fit_transforms(pairs_of(real, sim), MIN_FRACTION)
+    assert_finite(t)
+    assert t.gamma == 1.0
+    assert t.a == pytest.approx(2e4, rel=0.05)
+    assert (t.a_noise, t.b_noise) == (1.0, 0.0)
+
+
+def test_no_positive_real_mass_is_a_clear_error():
+    real, sim = noisy_pairs()
+    with pytest.raises(ValueError, match="no object signal"):
+        fit_transforms(pairs_of(-np.abs(real) - 1, sim), MIN_FRACTION)
+
+
+# --- pairs, split, file ---------------------------------------------------------------------
+
+
+def write_set(root: Path, name: str, locations: list[int], rng: np.random.Generator) -> Path:
+    cs = parse_set_name(name)
+    values = rng.normal(0, 1, (len(locations), R, 3, 3, T)).astype(np.float32)
+    path = root / f"{name}.zarr"
+    write_features(path, cs, Features(values, np.array(locations), np.zeros((len(locations), R), np.int64), CROP), "NOOBJECT_8inch_3x3_lighton")
+    return path
+
+
+def write_twin_store(root: Path, name: str, size: str, locations: list[int]) -> Path:
+    path = root / f"{name}_{size}.zarr"
+    hist = np.tile(np.arange(geo.N_BINS, dtype=np.float32), (len(locations), 1)) * np.array(locations)[:, None]
+    write_twin(path, np.array(locations), hist, {"denali_twin": 1, "object": {"name": name}, "size": size})
+    return path
+
+
+def test_build_pairs_matches_twins_by_object_size_location(tmp_path):
+    rng = np.random.default_rng(0)
+    f1 = write_set(tmp_path, "A_8inch_3x3_lighton", [3, 5], rng)
+    f2 = write_set(tmp_path, "1_4inch_3x3_lighton", [5], rng)
+    twins = [write_twin_store(tmp_path, "A", "8inch", [1, 3, 5]), write_twin_store(tmp_path, "1", "4inch", [5])]
+    p = build_pairs([f1, f2], twins)
+    assert p.real.shape == (3, R, T) and p.sim.shape == (3, geo.N_BINS) and p.crop_start == CROP
+    assert p.keys[["set", "location"]].values.tolist() == [["1_4inch_3x3_lighton", 5], ["A_8inch_3x3_lighton", 3], ["A_8inch_3x3_lighton", 5]]
+    assert p.sim[:, 1].tolist() == [5.0, 3.0, 5.0]  # the twin's own location
+    with pytest.raises(ValueError, match="lacks locations \\[3\\]"):
+        build_pairs([f1], [write_twin_store(tmp_path / "x", "A", "8inch", [5])])
+    with pytest.raises(ValueError, match="no twin store of 1 4inch"):
+        build_pairs([f2], twins[:1])
+    off = write_set(tmp_path, "A_8inch_3x3_lightoff", [3], rng)
+    with pytest.raises(ValueError, match="not a 3x3 light-on"):
+        build_pairs([off], twins)
+
+
+def test_split_keeps_captures_whole_and_is_seeded():
+    keys = pd.DataFrame({"set": np.repeat(["a", "b"], 20), "location": np.tile(np.arange(20), 2)})
+    s = split_pairs(keys, 42, 0.3)
+    assert len(s.test) == 12 and not set(s.train) & set(s.test)
+    assert np.array_equal(s.test, split_pairs(keys, 42, 0.3).test)
+    assert not np.array_equal(s.test, split_pairs(keys, 43, 0.3).test)
+
+
+def test_transforms_file_round_trip_and_bad_file(tmp_path):
+    t = Transforms(3.0, 0.9, tuple(np.full(KERNEL_BINS, 1 / KERNEL_BINS)), 1.2, 40.0)
+    write_transforms(tmp_path / "t.json", t, {"n_pairs": 1})
+    assert read_transforms(tmp_path / "t.json") == t
+    (tmp_path / "bad.json").write_text(json.dumps({**t.to_dict(), "a_noise": 0.5}))
+    with pytest.raises(ValueError, match="bad.json: parameters out of range"):
+        read_transforms(tmp_path / "bad.json")
+    (tmp_path / "worse.json").write_text("{}")
+    with pytest.raises(ValueError, match="worse.json: not a transforms file"):
+        read_transforms(tmp_path / "worse.json")
