@@ -10,6 +10,7 @@ include: "rules/twin.smk"
 include: "rules/preprocess.smk"
 include: "rules/train.smk"
 include: "rules/report.smk"
+include: "rules/fit.smk"
 
 
 rule all:
@@ -29,4 +30,6 @@ rule all:
         TWINS,
         "results/render_benchmark.png",
         "results/fig18.png",
+        "results/transforms.json",
+        "results/fig9.png",
     default_target: True

@@ -81,7 +81,7 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     out = snakemake(wd, "-n", *TINY).stdout
     jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
     per_set = {"rig": 2, "ingest": 8, "poses": 8, "preprocess": 4}
-    aggregates = {"index": 1, "table4": 1, "calibrate": 1, "detections": 1, "dataset": 1, "render_benchmark": 1, "fig18": 1, "all": 1}
+    aggregates = {"index": 1, "table4": 1, "calibrate": 1, "detections": 1, "dataset": 1, "render_benchmark": 1, "fig18": 1, "transforms": 1, "fig9": 1, "all": 1}
     # every training cell reads the dataset; tiny: 1 seed, 13 Table 5 cells + 9 more Table 2 cells + 3 linear
     training = {"train": 25, "table5": 1, "table2": 1, "table10": 1, "training_curves": 2, "speed_vs_accuracy": 1}
     # Every twin (8 old + 2 new) renders from the calibration, an aggregate over
@@ -228,3 +228,12 @@ def test_renderer_settings_rerun_only_what_uses_them(tiny_run, tmp_path):
     out = snakemake(wd, "-n", *TARGETS, *TINY).stdout
     jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
     assert jobs["twin"] == 2 and jobs["fig18"] == 1 and jobs["render_benchmark"] == 1
+
+
+def test_transforms_and_fig9(tiny_run):
+    t = json.loads((tiny_run / "results/transforms.json").read_text())
+    assert t["a"] > 0 and t["a_noise"] >= 1 and t["b_noise"] >= 0
+    assert len(t["kernel"]) == t["kernel_bins"] == 11 and abs(sum(t["kernel"]) - 1) < 1e-6
+    fig9 = pd.read_csv(tiny_run / "results/fig9.csv")
+    assert set(fig9["fidelity"]) == {"raw", "scaled", "scaled+blurred", "scaled+blurred+noisy"}
+    assert (tiny_run / "results/fig9.png").stat().st_size > 10_000

@@ -248,6 +248,54 @@ def cmd_fig18(args: argparse.Namespace) -> None:
     log.info("wrote %s", args.out)
 
 
+def _pairs_and_split(args: argparse.Namespace):
+    """The sim-to-real pairs of --features and --twins and the real train/test split of --config."""
+    from denali_pipe.transforms import build_pairs, split_pairs
+
+    missing = {"seed", "fit"} - set(args.config)
+    if missing:
+        raise ValueError(f"--config lacks the keys {sorted(missing)}")
+    pairs = build_pairs([Path(p) for p in args.features], [Path(p) for p in args.twins])
+    return pairs, split_pairs(pairs.keys, args.config["seed"], args.config["fit"]["test_fraction"])
+
+
+def cmd_fit_transforms(args: argparse.Namespace) -> None:
+    import time
+
+    from denali_pipe.transforms import fit_transforms, write_transforms
+
+    t0 = time.perf_counter()
+    pairs, split = _pairs_and_split(args)
+    t = fit_transforms(pairs.subset(split.train), args.config["fit"]["min_sim_fraction"])
+    record = {"n_pairs": int(len(split.train)), "n_test_pairs": int(len(split.test)), "repeats": int(pairs.real.shape[1]), "crop_start": pairs.crop_start, "bins": pairs.bins, "config": args.config, "seconds": time.perf_counter() - t0}
+    write_transforms(Path(args.out), t, record)
+    log.info("wrote %s: %s (%.1f s)", args.out, t.to_dict(), record["seconds"])
+
+
+def cmd_fig9(args: argparse.Namespace) -> None:
+    import numpy as np
+    import pandas as pd
+    import torch
+
+    from denali_pipe.dataset import location_labels
+    from denali_pipe.fig9 import run_fig9
+    from denali_pipe.report.fig9 import write_fig9
+    from denali_pipe.train import Hyper
+    from denali_pipe.transforms import read_transforms
+
+    torch.set_num_threads(args.threads)
+    pairs, _ = _pairs_and_split(args)
+    labels = location_labels(pd.read_parquet(args.positions))
+    unlabelled = sorted(set(pairs.keys["location"]) - set(labels))
+    if unlabelled:
+        raise ValueError(f"{args.positions}: no tag 1 position for locations {unlabelled}")
+    xy = np.array([labels[int(k)] for k in pairs.keys["location"]], np.float32)
+    runs = run_fig9(pairs, xy, read_transforms(Path(args.transforms)), args.config["fit"], Hyper(**args.hyper), args.config["seed"])
+    out = Path(args.out)
+    table = write_fig9(runs, out, out.with_suffix(".csv"))
+    log.info("wrote %s and its CSV:\n%s", out, table.to_string(index=False))
+
+
 def cmd_rig_examples(args: argparse.Namespace) -> None:
     from denali_pipe.rig.examples import rig_examples
 
@@ -364,6 +412,24 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "variant": ..., "fig18": {...}}')
     s.add_argument("--out", required=True, help="PNG path; the plotted data goes beside it as CSV")
     s.set_defaults(func=cmd_fig18)
+
+    s = sub.add_parser("fit-transforms", help="fit the sim-to-real transforms (scale, blur, noise) on the training captures' twins")
+    s.add_argument("--features", nargs="+", required=True, help="3x3 light-on feature stores (results/features/<set>.zarr)")
+    s.add_argument("--twins", nargs="+", required=True, help="their objects' twin stores (results/twin/<object>_<size>.zarr)")
+    s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "fit": {...}}')
+    s.add_argument("--out", required=True, help="output results/transforms.json")
+    s.set_defaults(func=cmd_fit_transforms)
+
+    s = sub.add_parser("fig9", help="Fig 9: localisation RMSE on real captures against real samples added to simulated training data")
+    s.add_argument("--features", nargs="+", required=True, help="3x3 light-on feature stores (results/features/<set>.zarr)")
+    s.add_argument("--twins", nargs="+", required=True, help="their objects' twin stores (results/twin/<object>_<size>.zarr)")
+    s.add_argument("--positions", required=True, help="results/calibration/tag1_positions.parquet (location labels)")
+    s.add_argument("--transforms", required=True, help="results/transforms.json")
+    s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "fit": {...}}')
+    s.add_argument("--hyper", type=_json, required=True, help='JSON {"lr", "epochs", "batch_size", "norm"} of the localiser')
+    s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
+    s.set_defaults(func=cmd_fig9)
 
     s = sub.add_parser("rig-examples", help="plot example histograms with the three-bounce bump marked")
     s.add_argument("--sets", nargs="+", required=True, help="object capture-set stores (<set>.zarr)")
