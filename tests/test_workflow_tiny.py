@@ -12,6 +12,7 @@ from denali_pipe.capture_sets import expected_sets
 from denali_pipe.geometry import select_locations
 from denali_pipe.io.store import open_set
 from denali_pipe.objects import load_catalogue
+from denali_pipe.transforms import FIDELITIES
 from denali_pipe.twin.render import read_twin
 
 from workflow import copy_workflow, snakemake
@@ -219,7 +220,7 @@ def test_renderer_settings_rerun_only_what_uses_them(tiny_run, tmp_path):
     preset = wd / "config/presets/tiny.yaml"
     text = preset.read_text()
     # the analytic twins do not use mitransient's spp; the benchmark does
-    preset.write_text(text + "  mitransient:\n    spp: 1234\n")
+    preset.write_text(text.replace("twin:\n", "twin:\n  mitransient:\n    spp: 1234\n"))
     out = snakemake(wd, "-n", *TARGETS, *TINY).stdout
     jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
     assert jobs == {"render_benchmark": 1, "total": 1}
@@ -235,5 +236,5 @@ def test_transforms_and_fig9(tiny_run):
     assert t["a"] > 0 and t["a_noise"] >= 1 and t["b_noise"] >= 0
     assert len(t["kernel"]) == t["kernel_bins"] == 11 and abs(sum(t["kernel"]) - 1) < 1e-6
     fig9 = pd.read_csv(tiny_run / "results/fig9.csv")
-    assert set(fig9["fidelity"]) == {"raw", "scaled", "scaled+blurred", "scaled+blurred+noisy"}
+    assert set(fig9["fidelity"]) == set(FIDELITIES) and len(FIDELITIES) == 4
     assert (tiny_run / "results/fig9.png").stat().st_size > 10_000
