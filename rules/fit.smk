@@ -2,33 +2,6 @@
 # their twins (results/transforms.json), and Fig 9 (a 1D CNN localiser trained
 # on twins at each fidelity plus a few real samples, scored on real captures).
 
-FIT = config["fit"]
-
-
-def fit_sets():
-    """The 3x3 light-on base-object capture sets: the real side of the pairs.
-    Drawn when a fit rule is needed, so a config without them fails only then."""
-    sets = [s for s in SETS if s.name in benchmark_sets("3x3") and s.light_on]
-    if not sets:
-        raise ValueError("the sim-to-real fit needs 3x3 light-on base-object capture sets (config `resolutions`, `lightings`, `objects`)")
-    return sets
-
-
-def fit_inputs(wildcards):
-    sets = fit_sets()
-    return {
-        "features": [f"results/features/{s.name}.zarr" for s in sets],
-        "twins": sorted({f"results/twin/{s.object}_{s.size}.zarr" for s in sets}),
-    }
-
-
-# The fit's and Fig 9's settings: one JSON each, so that a Fig 9 setting reruns no fit.
-FIT_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": {k: FIT[k] for k in ("test_fraction", "min_sim_fraction")}}, sort_keys=True)
-FIG9_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": FIT}, sort_keys=True)
-# The localiser's optimiser settings are the benchmark's 1D CNN location ones; epochs are Fig 9's own.
-FIG9_HYPER = json.dumps({**TRAIN["hyper"]["cnn1d"]["location"], "epochs": FIT["fig9"]["epochs"]}, sort_keys=True)
-
-
 rule transforms:
     input:
         unpack(fit_inputs),
