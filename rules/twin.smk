@@ -66,6 +66,7 @@ rule fig18:
         sets=lambda w: [store(s.name) for s in FIG18()],
         backgrounds=lambda w: [store(background_of(s).name) for s in FIG18()],
         twins=lambda w: [f"results/twin/{s.object}_{s.size}.zarr" for s in FIG18()],
+        crop="results/features/crop_3x3.json",
     output:
         png="results/fig18.png",
         csv="results/fig18.csv",
@@ -77,4 +78,4 @@ rule fig18:
         "../envs/denali.yaml"
     shell:
         "denali fig18 {input.scene} --sets {input.sets} --backgrounds {input.backgrounds} --twins {input.twins}"
-        " --config {params.config:q} --out {output.png} > {log} 2>&1"
+        " --crop {input.crop} --config {params.config:q} --out {output.png} > {log} 2>&1"

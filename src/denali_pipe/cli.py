@@ -239,12 +239,15 @@ def cmd_render_benchmark(args: argparse.Namespace) -> None:
 
 
 def cmd_fig18(args: argparse.Namespace) -> None:
+    import json
+
     from denali_pipe.report.fig18 import fig18
 
     if not len(args.sets) == len(args.backgrounds) == len(args.twins):
         raise ValueError(f"fig18: {len(args.sets)} sets, {len(args.backgrounds)} backgrounds and {len(args.twins)} twins; expected one of each per row")
     captures = [(Path(a), Path(b), Path(c)) for a, b, c in zip(args.sets, args.backgrounds, args.twins)]
-    fig18(captures, Path(args.scene), args.config, Path(args.out))
+    crop = json.loads(Path(args.crop).read_text())["crop_start"]
+    fig18(captures, Path(args.scene), crop, args.config, Path(args.out))
     log.info("wrote %s", args.out)
 
 
@@ -409,6 +412,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--sets", nargs="+", required=True, help="light-on 3x3 capture-set stores, one per row")
     s.add_argument("--backgrounds", nargs="+", required=True, help="the matching NOOBJECT stores, in the same order")
     s.add_argument("--twins", nargs="+", required=True, help="the matching twin stores (results/twin/<object>_<size>.zarr)")
+    s.add_argument("--crop", required=True, help="results/features/crop_3x3.json: the features' first kept bin")
     s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "variant": ..., "fig18": {...}}')
     s.add_argument("--out", required=True, help="PNG path; the plotted data goes beside it as CSV")
     s.set_defaults(func=cmd_fig18)

@@ -7,7 +7,7 @@ location; the real background-subtracted centre-pixel histogram (mean over
 repeats minus the NOOBJECT set's mean at the same location) and its running
 mean, overlaid with the twin's simulated transient on its own axis (absolute
 scale is not modelled: the sim-to-real transforms fit it). Bins before the end of the direct wall
-return (`preprocess.crop_window` of the background) are dropped, as the paper
+return (the features' crop window, `results/features/crop_3x3.json`) are dropped, as the paper
 crops them.
 
 The PNG is written with its data beside it as CSV (same stem): set,
@@ -30,7 +30,7 @@ from denali_pipe import geometry as geo  # noqa: E402
 from denali_pipe.atomic import atomic_file  # noqa: E402
 from denali_pipe.io.store import CaptureStore, open_set  # noqa: E402
 from denali_pipe.objects import object_mesh, spec_from_dict  # noqa: E402
-from denali_pipe.preprocess import crop_window, subtract_background  # noqa: E402
+from denali_pipe.preprocess import subtract_background  # noqa: E402
 from denali_pipe.seeds import derive_seed, rng_for  # noqa: E402
 from denali_pipe.twin.layout import Calibration, load_calibration, twin_scene  # noqa: E402
 from denali_pipe.twin.render import Twin, read_twin  # noqa: E402
@@ -60,9 +60,9 @@ def twin_view(mi, cal: Calibration, twin: Twin, location: int, frame_shape: tupl
     return render_rgb(mi, rgb_scene(mi, cal, scene, location, camera, spp), seed)
 
 
-def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, config: dict, out_png: Path) -> None:
+def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, crop: int, config: dict, out_png: Path) -> None:
     """captures: (set store, its NOOBJECT store, the object's twin store) per
-    row. config: {"seed": int, "fig18": {"rgb_spp": int}, "variant": str}.
+    row; crop: the features' first kept bin (results/features/crop_3x3.json). config: {"seed": int, "fig18": {"rgb_spp": int}, "variant": str}.
     The location of each row is drawn from the locations all three share."""
     from denali_pipe.twin.variant import load_mitsuba
 
@@ -77,7 +77,6 @@ def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, config: dic
         if not shared:
             raise ValueError(f"{set_path}, {bg_path} and {twin_path} share no gantry location")
         location = int(rng.choice(shared))
-        crop = crop_window([np.asarray(bg.histograms[:])])
         real = real_centre_histogram(store, bg, location)
         sim = twin.histogram(location)
         frame = store.frame("tracking_rgb", store.index_of(location))[..., ::-1]  # BGR -> RGB
