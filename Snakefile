@@ -1,6 +1,10 @@
 # denali-pipe: every table and figure of the DENALI paper as one DAG.
 # `snakemake --cores all` builds `all`; any single target works too, e.g.
-# `snakemake --cores all results/table4.csv`.
+# `snakemake --cores all results/table4.csv`. `snakemake --report
+# results/report.html` collects every table and figure with its caption.
+
+report: "report/workflow.rst"
+
 
 include: "rules/common.smk"
 include: "rules/rig.smk"

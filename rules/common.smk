@@ -111,6 +111,11 @@ def lit_pose_tables():
     return [f"results/poses/{s.name}.parquet" for s in SETS if s.light_on]
 
 
+def calibration_pose_tables():
+    """The light-on background sets' pose tables: the calibration's fixed input."""
+    return [f"results/poses/{s.name}.parquet" for s in SETS if s.light_on and s.is_background]
+
+
 # --- preprocessing -----------------------------------------------------------
 
 

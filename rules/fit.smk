@@ -6,7 +6,7 @@ rule transforms:
     input:
         unpack(fit_inputs),
     output:
-        "results/transforms.json",
+        report("results/transforms.json", caption="../report/transforms.rst", category="5. Sim-to-real"),
     params:
         config=FIT_JOB_CONFIG,
     log:
@@ -25,7 +25,7 @@ rule fig9:
         positions="results/calibration/tag1_positions.parquet",
         transforms="results/transforms.json",
     output:
-        png="results/fig9.png",
+        png=report("results/fig9.png", caption="../report/fig9.rst", category="5. Sim-to-real"),
         csv="results/fig9.csv",
     params:
         config=FIG9_JOB_CONFIG,

@@ -37,7 +37,7 @@ rule table4:
     input:
         [store(name) for name in SET_NAMES],
     output:
-        "results/table4.csv",
+        report("results/table4.csv", caption="../report/table4.rst", category="1. Captures"),
     log:
         "logs/table4.log",
     conda:

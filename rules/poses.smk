@@ -1,6 +1,7 @@
-# Tracking poses: AprilTag detection and PnP per capture set, then one
-# calibration over the light-on sets (world frame, z-score filtering, scene,
-# Table 6, Fig 12) and detection rates over every set.
+# Tracking poses: AprilTag detection and PnP per capture set; the calibration
+# (world frame, z-score filtering, tag-1 positions, scene) from the light-on
+# background sets; Table 6 and Fig 12 over every light-on set; detection rates
+# over every set.
 
 
 rule poses:
@@ -18,29 +19,45 @@ rule poses:
         "denali poses {input} --out {output} > {log} 2>&1"
 
 
+# Calibrated from the background sets only, which every configuration has and
+# which visit every gantry location: the location labels and the twins then
+# stay the same when objects are added (on the demo: 0.12/0.35/0.41 mm mean
+# x/y/z error against the rig's truth, vs 0.10/0.30/0.33 mm from all 138 sets).
 rule calibrate:
     input:
-        poses=lit_pose_tables(),
-        figure_store=store(figure_set()),
+        calibration_pose_tables(),
     output:
         positions="results/calibration/tag1_positions.parquet",
         scene="results/calibration/scene.json",
-        table6="results/table6.csv",
-        fig12="results/fig12.png",
     log:
         "logs/calibrate.log",
     conda:
         "../envs/denali.yaml"
     shell:
-        "denali calibrate {input.poses} --figure-store {input.figure_store} --outdir results/calibration"
-        " --table6 {output.table6} --fig12 {output.fig12} > {log} 2>&1"
+        "denali calibrate {input} --outdir results/calibration > {log} 2>&1"
+
+
+rule table6:
+    input:
+        poses=lit_pose_tables(),
+        figure_store=store(figure_set()),
+    output:
+        table6=report("results/table6.csv", caption="../report/table6.rst", category="2. Tracking poses"),
+        fig12=report("results/fig12.png", caption="../report/fig12.rst", category="2. Tracking poses"),
+        fig12_data="results/fig12.csv",
+    log:
+        "logs/table6.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali table6 {input.poses} --figure-store {input.figure_store} --table6 {output.table6} --fig12 {output.fig12} > {log} 2>&1"
 
 
 rule detections:
     input:
         [f"results/poses/{name}.parquet" for name in SET_NAMES],
     output:
-        "results/calibration/detections.csv",
+        report("results/calibration/detections.csv", caption="../report/detections.rst", category="2. Tracking poses"),
     log:
         "logs/detections.log",
     conda:

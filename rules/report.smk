@@ -6,7 +6,7 @@ rule table5:
     input:
         run_files(["cnn1d"], TASKS, SPLITS),
     output:
-        "results/table5.csv",
+        report("results/table5.csv", caption="../report/table5.rst", category="3. Training"),
     log:
         "logs/report/table5.log",
     conda:
@@ -19,7 +19,7 @@ rule table2:
     input:
         run_files(MODELS, TASKS, ["random"]),
     output:
-        "results/table2.csv",
+        report("results/table2.csv", caption="../report/table2.rst", category="3. Training"),
     log:
         "logs/report/table2.log",
     conda:
@@ -32,7 +32,7 @@ rule table10:
     input:
         run_files(MODELS, TASKS, ["random"]),
     output:
-        "results/table10.csv",
+        report("results/table10.csv", caption="../report/table10.rst", category="3. Training"),
     log:
         "logs/report/table10.log",
     conda:
@@ -45,20 +45,22 @@ rule speed_vs_accuracy:
     input:
         run_files([*MODELS, LINEAR], TASKS, ["random"]),
     output:
-        "results/speed_vs_accuracy.png",
+        png=report("results/speed_vs_accuracy.png", caption="../report/speed_vs_accuracy.rst", category="3. Training"),
+        csv="results/speed_vs_accuracy.csv",
     log:
         "logs/report/speed_vs_accuracy.log",
     conda:
         "../envs/denali.yaml"
     shell:
-        "denali report speed-accuracy {input} --out {output} > {log} 2>&1"
+        "denali report speed-accuracy {input} --out {output.png} > {log} 2>&1"
 
 
 rule training_curves:
     input:
         lambda w: run_files(["cnn1d"], [CURVE_TASK[w.fig]], ["random"], "curves.csv"),
     output:
-        "results/{fig}.png",
+        png=report("results/{fig}.png", caption="../report/training_curves.rst", category="3. Training"),
+        csv="results/{fig}.csv",
     params:
         title=lambda w: shlex.quote(f"1D CNN {CURVE_TASK[w.fig]} training curves ({TRAIN['resolution']}, random split, {TRAIN['protocol']} protocol)"),
     wildcard_constraints:
@@ -68,4 +70,4 @@ rule training_curves:
     conda:
         "../envs/denali.yaml"
     shell:
-        "denali report {wildcards.fig} {input} --title {params.title} --out {output} > {log} 2>&1"
+        "denali report {wildcards.fig} {input} --title {params.title} --out {output.png} > {log} 2>&1"

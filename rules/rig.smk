@@ -31,7 +31,7 @@ rule rig_examples:
         sets=[obj for obj, _ in example_pairs()],
         backgrounds=[bg for _, bg in example_pairs()],
     output:
-        png="results/rig_examples.png",
+        png=report("results/rig_examples.png", caption="../report/rig_examples.rst", category="1. Captures"),
         csv="results/rig_examples.csv",
     log:
         "logs/rig_examples.log",

@@ -18,6 +18,8 @@ rule train:
         validation=config["train"]["validation_fraction"],
         budget=budget_arg,
     threads: config["train"]["threads"]
+    resources:
+        gpu=config["train"]["gpus"],
     log:
         f"logs/{RUN_DIR}.log",
     benchmark:

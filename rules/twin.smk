@@ -45,7 +45,7 @@ rule render_benchmark:
         scene="results/calibration/scene.json",
         meshes=TWIN_MESHES,
     output:
-        png="results/render_benchmark.png",
+        png=report("results/render_benchmark.png", caption="../report/render_benchmark.rst", category="4. Digital twin"),
         csv="results/render_benchmark.csv",
     params:
         objects=json.dumps(sorted((CATALOGUE[name].to_dict() for name in dict.fromkeys(n for n, _ in TWIN_PAIRS)), key=lambda d: d["name"]), sort_keys=True),
@@ -68,7 +68,7 @@ rule fig18:
         twins=lambda w: [f"results/twin/{s.object}_{s.size}.zarr" for s in FIG18()],
         crop="results/features/crop_3x3.json",
     output:
-        png="results/fig18.png",
+        png=report("results/fig18.png", caption="../report/fig18.rst", category="4. Digital twin"),
         csv="results/fig18.csv",
     params:
         config=json.dumps({"seed": config["seed"], "variant": TWIN["mitransient"]["variant"], "fig18": TWIN["fig18"]}, sort_keys=True),

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
-"""Benchmark the synthetic capture rig and the DAG; prints figures, asserts nothing.
+"""Benchmark the synthetic capture rig; prints figures, asserts nothing.
 
-    python scripts/bench_rig.py            # tiny preset + paper-preset DAG build
+    python scripts/bench_rig.py            # tiny preset
     python scripts/bench_rig.py --demo     # also the demo preset's full raw tree (minutes)
 
 Each preset runs in a scratch copy of the workflow. Per-job peak memory comes
@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import shutil
 import subprocess
 import sys
@@ -37,7 +36,7 @@ def run(wd: Path, *args: str) -> tuple[float, str]:
 
 def scratch() -> Path:
     wd = Path(tempfile.mkdtemp(prefix="denali-bench-"))
-    for name in ("Snakefile", "rules", "config", "profiles", "envs"):
+    for name in ("Snakefile", "rules", "config", "profiles", "envs", "report"):
         (shutil.copytree if (REPO / name).is_dir() else shutil.copy2)(REPO / name, wd / name)
     return wd
 
@@ -62,23 +61,12 @@ def bench_tree(preset: list[str], label: str, cores: int) -> None:
         shutil.rmtree(wd)
 
 
-def bench_dag() -> None:
-    wd = scratch()
-    try:
-        secs, out = run(wd, "-n", "--quiet", "rules", "--configfile", "config/presets/paper.yaml")
-        jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
-        print(f"paper preset: `snakemake -n` builds a DAG of {jobs['total']} jobs in {secs:.1f} s")
-    finally:
-        shutil.rmtree(wd)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--demo", action="store_true", help="also write the demo preset's raw tree")
     ap.add_argument("--cores", type=int, default=2)
     args = ap.parse_args()
     bench_tree(["--configfile", "config/presets/tiny.yaml"], "tiny", args.cores)
-    bench_dag()
     if args.demo:
         bench_tree([], "demo", args.cores)
 

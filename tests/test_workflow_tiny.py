@@ -72,29 +72,54 @@ def test_stores_index_and_table4(tiny_run):
     assert t4.loc["total", "paper_total_gb"] == pytest.approx(96.5, abs=0.02)
 
 
+# Outputs of one set or one object (and the calibration, which reads the
+# background sets only): adding an object must leave every one of them alone.
+PER_SET_OUTPUTS = ("data/raw", "results/store", "results/index", "results/poses", "results/features", "results/twin", "results/calibration")
+AGGREGATES_AMONG_THEM = {"results/index/captures.parquet", "results/calibration/detections.csv"}
+
+
+def file_states(wd):
+    """{relative path: (sha256, mtime_ns)} of every per-set, per-object and calibration file."""
+    import hashlib
+
+    states = {}
+    for root in PER_SET_OUTPUTS:
+        for path in sorted((wd / root).rglob("*")):
+            if path.is_file() and str(path.relative_to(wd)) not in AGGREGATES_AMONG_THEM:
+                states[str(path.relative_to(wd))] = (hashlib.sha256(path.read_bytes()).hexdigest(), path.stat().st_mtime_ns)
+    return states
+
+
 def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     wd = tmp_path / "wd"
     shutil.copytree(tiny_run, wd, symlinks=True)
+    before = file_states(wd)
     with open(wd / "config/objects.tsv", "a") as f:
         f.write("newplus\tplus\tshape\t4inch,8inch\tbase\tretroreflective\t\n")
     preset = wd / "config/presets/tiny.yaml"
     preset.write_text(preset.read_text().replace("generalization1white]", "generalization1white, newplus]"))
     out = snakemake(wd, "-n", *TINY).stdout
     jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
-    per_set = {"rig": 2, "ingest": 8, "poses": 8, "preprocess": 4}
-    aggregates = {"index": 1, "table4": 1, "calibrate": 1, "detections": 1, "dataset": 1, "render_benchmark": 1, "fig18": 1, "transforms": 1, "fig9": 1, "all": 1}
+    # the new object: 2 sizes x 2 resolutions x 2 lightings; twins per object x size
+    own = {"rig": 2, "ingest": 8, "poses": 8, "preprocess": 4, "twin": 2}
+    aggregates = {"index": 1, "table4": 1, "table6": 1, "detections": 1, "dataset": 1, "render_benchmark": 1, "fig18": 1, "transforms": 1, "fig9": 1, "all": 1}
     # every training cell reads the dataset; tiny: 1 seed, 13 Table 5 cells + 9 more Table 2 cells + 3 linear
     training = {"train": 25, "table5": 1, "table2": 1, "table10": 1, "training_curves": 2, "speed_vs_accuracy": 1}
-    # Every twin (8 old + 2 new) renders from the calibration, an aggregate over
-    # every light-on set, which the new sets change.
-    twins = {"twin": 10}
-    expected = {**per_set, **aggregates, **training, **twins}
+    expected = {**own, **aggregates, **training}
     assert jobs == {**expected, "total": sum(expected.values())}
     rig_jobs = re.findall(r"rule rig:\n    output: data/raw/(\w+?)_(4inch|8inch)_", out)
     assert sorted(rig_jobs) == [("newplus", "4inch"), ("newplus", "8inch")]
+    assert sorted(re.findall(r"rule twin:\n    output: results/twin/(\w+)\.zarr", out)) == ["newplus_4inch", "newplus_8inch"]
     assert {m for m in re.findall(r"wildcards: set=(\w+)", out)} == {
         f"newplus_{size}_{res}_{light}" for size in ("4inch", "8inch") for res in ("3x3", "8x8") for light in ("lighton", "lightoff")
     }
+    snakemake(wd, "--cores", "2", *TINY)
+    after = file_states(wd)
+    # every old per-set and per-object output is byte-identical and untouched (same mtime)
+    assert {k: after.get(k) for k in before} == before
+    added = {k.split("/")[2].split(".")[0] for k in set(after) - set(before) if k.count("/") >= 2}
+    assert added and all(name.startswith("newplus_") for name in added), sorted(added)
+    assert "Nothing to be done" in snakemake(wd, "-n", *TINY).stdout
 
 
 def test_nothing_left_to_do(tiny_run):
@@ -238,3 +263,26 @@ def test_transforms_and_fig9(tiny_run):
     fig9 = pd.read_csv(tiny_run / "results/fig9.csv")
     assert set(fig9["fidelity"]) == set(FIDELITIES) and len(FIDELITIES) == 4
     assert (tiny_run / "results/fig9.png").stat().st_size > 10_000
+
+
+# --- the HTML report -------------------------------------------------------------
+
+
+REPORTED = (
+    "rig_examples.png", "table4.csv", "table6.csv", "fig12.png", "detections.csv", "table5.csv", "table2.csv", "table10.csv",
+    "fig16.png", "fig17.png", "speed_vs_accuracy.png", "render_benchmark.png", "fig18.png", "transforms.json", "fig9.png",
+)  # fmt: skip
+
+
+def test_report_has_every_table_and_figure_with_its_caption(tiny_run):
+    proc = snakemake(tiny_run, "--report", "results/report.html", *TINY)
+    added = re.findall(r"^Adding (\S+) \(", proc.stderr + proc.stdout, re.M)
+    assert sorted(added) == sorted(REPORTED)
+    # captions are reStructuredText rendered by docutils: a markup slip shows up as ERROR/WARNING
+    assert not re.search(r"\((ERROR|WARNING)/\d\)", proc.stderr + proc.stdout)
+    html = (tiny_run / "results/report.html").read_text()
+    # every caption names the preset; the training ones name the protocol
+    assert html.count('Preset <tt class=\\"docutils literal\\">tiny</tt>') == len(REPORTED)
+    assert html.count('protocol <tt class=\\"docutils literal\\">clean</tt>') + html.count('Protocol <tt class=\\"docutils literal\\">clean</tt>') >= 6
+    for title in ("Table 5: the 1D CNN under five train/test splits", "Figure 16: 1D CNN localisation", "Figure 17: 1D CNN shape", "Figure 9: localisation RMSE"):
+        assert title in html

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from conftest import REPO
 
-WORKFLOW_FILES = ("Snakefile", "rules", "config", "profiles", "envs")
+WORKFLOW_FILES = ("Snakefile", "rules", "config", "profiles", "envs", "report")
 
 
 def copy_workflow(dest: Path) -> Path:

@@ -1,9 +1,10 @@
 """The tracking-pose stage: AprilTag detection, PnP, z-score filtering and scene calibration.
 
-    detect_set(store) -> per-set pose table          (poses.detect job, one per light-on set)
-    calibrate([tables]) -> Calibration                (poses.calibrate job: object positions,
-                                                       scene.json dict, detection rates)
+    detect_set(store) -> per-set pose table          (`poses` job, one per set)
+    calibrate([tables]) -> Calibration                (`calibrate` job on the light-on background
+                                                       sets: object positions, scene.json dict)
     report.table6.table6(filtered), report.fig12.write_fig12(...)
+                                                      (`table6` job: calibrate() over every light-on set)
 
 Modules: `detect` (detectors, corner refinement), `pnp` (intrinsics, board and
 single-tag PnP, IPPE, planes), `estimate` (per frame and per set),

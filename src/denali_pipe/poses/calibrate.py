@@ -1,6 +1,9 @@
-"""Scene calibration from every set's tag estimates: the object tag's position
-per gantry location (the regression targets), the scene description that the
-digital twin reads (scene.json), and detection rates per tag and lighting.
+"""Scene calibration from the given sets' tag estimates: the object tag's
+position per gantry location (the regression targets), the scene description
+that the digital twin reads (scene.json), and detection rates per tag and
+lighting. The workflow calibrates from the light-on background sets (fixed
+whatever objects a configuration adds) and runs the same pooling over every
+light-on set for Table 6 and Fig 12.
 
 Inputs are `estimate.detect_set` tables, one per set, pooled. Steps:
 1. `replane`: the sensor tag 0 and the object tag 1 are re-located on
