@@ -143,7 +143,7 @@ def test_paper_preset_dag_builds(tiny_run):
     counts = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
     # one rig job per object x size (67) plus the two background kinds
     assert counts["rig"] == 30 * 2 + 3 + 2 * 2 + 2
-    assert counts["total"] < 2000
+    assert counts["total"] <= 2000  # the scale target; scripts/bench_dag.py prints the build time
 
 
 def test_bad_set_fails_alone_with_keep_going(tiny_run, tmp_path):

@@ -1,0 +1,104 @@
+"""The tiny preset's Table 5 on a real single-node SLURM cluster, through
+`profiles/slurm`: every job is a SLURM job, a job killed by SLURM fails alone
+(--keep-going), and the rerun runs exactly that job and its dependents."""
+
+import re
+import subprocess
+import threading
+import time
+
+import pytest
+
+from slurm_cluster import SlurmUnavailable, local_slurm
+from workflow import copy_workflow, snakemake
+
+pytestmark = pytest.mark.slurm
+TINY = ("--configfile", "config/presets/tiny.yaml")
+TARGET = "results/table5.csv"
+# the cell SLURM kills: nothing but Table 5 depends on it
+VICTIM = "clean_3x3_random_cnn1d_location_42"
+VICTIM_DIR = "results/runs/clean/3x3/random/cnn1d_location/seed42"
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
+    try:
+        with local_slurm(tmp_path_factory.mktemp("slurm")) as c:
+            yield c
+    except SlurmUnavailable as e:
+        pytest.skip(str(e))
+
+
+def submissions(log: str) -> dict[int, str]:
+    """{SLURM job id: rule_<name> or group_<name>_<rules>} of every submission Snakemake logged."""
+    return {int(m[1]): m[2] for m in re.finditer(r"submitted with SLURM jobid (\d+) \(log: \S*/slurm_logs/(\w+)/", log)}
+
+
+def cancel_when_queued(comment: str, stop: threading.Event) -> list[int]:
+    """scancel the SLURM job whose comment names `comment` as soon as it is queued."""
+    cancelled = []
+    while not stop.is_set() and not cancelled:
+        queue = subprocess.run(["squeue", "-h", "-o", "%i %k"], capture_output=True, text=True).stdout
+        for line in queue.splitlines():
+            job_id, _, job_comment = line.partition(" ")
+            if job_comment.endswith(comment):
+                subprocess.run(["scancel", job_id], check=True)
+                cancelled.append(int(job_id))
+        time.sleep(0.5)
+    return cancelled
+
+
+def mtimes(wd) -> dict[str, int]:
+    return {str(p.relative_to(wd)): p.stat().st_mtime_ns for p in (wd / "results").rglob("*") if p.is_file()}
+
+
+def test_table5_on_slurm_and_a_killed_job_reruns_alone(cluster, tmp_path):
+    wd = copy_workflow(tmp_path)
+    run = ("--profile", "profiles/slurm", *cluster.snakemake_args, "--jobs", "4")
+
+    stop = threading.Event()
+    cancelled: list[int] = []
+    killer = threading.Thread(target=lambda: cancelled.extend(cancel_when_queued(VICTIM, stop)))
+    killer.start()
+    start = time.perf_counter()
+    try:
+        first = snakemake(wd, TARGET, *run, "--keep-going", *TINY, check=False)
+    finally:
+        stop.set()
+        killer.join()
+    first_s = time.perf_counter() - start
+    log = first.stdout + first.stderr
+    assert first.returncode != 0 and len(cancelled) == 1, log[-3000:]
+    assert f"SLURM-job '{cancelled[0]}' failed" in log
+    assert not (wd / TARGET).exists() and not (wd / VICTIM_DIR / "metrics.json").exists()
+
+    # every job ran as a SLURM job: slurmctld accepted each submission and saw
+    # each end (the killed one may have been cancelled before it started)
+    jobs = submissions(log)
+    assert set(jobs) == cluster.job_ids_submitted() and cancelled[0] in jobs
+    assert set(jobs) - set(cancelled) <= cluster.job_ids_completed()
+    # the profile's groups batch the 58 jobs of the tiny Table 5 DAG into fewer submissions
+    kinds = {re.sub(r"_(ingest|poses|rig|preprocess)", "", name) for name in jobs.values()}
+    assert {"group_capture", "group_features", "rule_crop_window", "rule_calibrate", "rule_dataset", "rule_train"} == kinds
+    assert len(jobs) < 30
+
+    # the rerun: exactly the killed cell and Table 5, nothing else touched
+    dry = snakemake(wd, TARGET, "-n", *TINY).stdout
+    counts = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", dry, re.M)}
+    assert counts == {"train": 1, "table5": 1, "total": 2}
+    assert VICTIM_DIR in dry
+    before = mtimes(wd)
+    start = time.perf_counter()
+    second = snakemake(wd, TARGET, *run, *TINY)
+    print(f"SLURM: first run {len(jobs)} SLURM jobs in {first_s:.0f} s; rerun {time.perf_counter() - start:.0f} s")
+    rerun = submissions(second.stdout + second.stderr)
+    assert sorted(rerun.values()) == ["rule_table5", "rule_train"]
+    assert set(rerun) <= cluster.job_ids_completed() and not set(rerun) & set(jobs)
+    # the cell asked SLURM for the profile's memory and runtime (slurmctld keeps it MinJobAge = 300 s)
+    train_id = next(i for i, name in rerun.items() if name == "rule_train")
+    job = subprocess.run(["scontrol", "show", "job", str(train_id)], capture_output=True, text=True, check=True).stdout
+    assert "TimeLimit=1-00:00:00" in job and re.search(r"TRES=cpu=1,mem=8000M", job), job
+    after = mtimes(wd)
+    touched = {k for k in before if after.get(k) != before[k]}
+    assert touched == set(), sorted(touched)
+    assert (wd / TARGET).exists() and (wd / VICTIM_DIR / "metrics.json").exists()
