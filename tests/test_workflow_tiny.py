@@ -109,7 +109,7 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     assert jobs == {**expected, "total": sum(expected.values())}
     rig_jobs = re.findall(r"rule rig:\n    output: data/raw/(\w+?)_(4inch|8inch)_", out)
     assert sorted(rig_jobs) == [("newplus", "4inch"), ("newplus", "8inch")]
-    assert sorted(re.findall(r"rule twin:\n    output: results/twin/(\w+)\.zarr", out)) == ["newplus_4inch", "newplus_8inch"]
+    assert sorted(re.findall(r"output: results/twin/(\w+)\.zarr", out)) == ["newplus_4inch", "newplus_8inch"]
     assert {m for m in re.findall(r"wildcards: set=(\w+)", out)} == {
         f"newplus_{size}_{res}_{light}" for size in ("4inch", "8inch") for res in ("3x3", "8x8") for light in ("lighton", "lightoff")
     }
