@@ -212,6 +212,15 @@ def test_changing_one_models_hyperparameters_reruns_only_its_cells_and_tables(ti
     assert "mlp_location" in out
 
 
+def test_training_cells_request_the_configured_gpus(tiny_run, tmp_path):
+    cell = "results/runs/clean/3x3/random/cnn1d_location/seed42/metrics.json"
+    cfg = tmp_path / "gpu.yaml"
+    cfg.write_text("train:\n  gpus: 1\n")
+    for extra, gpus in (((), 0), ((str(cfg),), 1)):
+        out = snakemake(tiny_run, "-n", "--force", cell, "--configfile", "config/presets/tiny.yaml", *extra).stdout
+        assert re.search(rf"resources: .*\bgpu={gpus}\b", out), out[-2000:]
+
+
 # --- digital twins ---------------------------------------------------------------
 
 
