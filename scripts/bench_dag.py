@@ -16,7 +16,7 @@ import re
 import shutil
 import statistics
 
-from bench_rig import REPO, run, scratch
+from bench_rig import run, scratch
 
 
 def job_counts(out: str) -> dict[str, int]:

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from slurm_cluster import SlurmUnavailable, local_slurm
-from workflow import copy_workflow, snakemake
+from workflow import copy_workflow, job_counts, snakemake
 
 pytestmark = pytest.mark.slurm
 TINY = ("--configfile", "config/presets/tiny.yaml")
@@ -84,7 +84,7 @@ def test_table5_on_slurm_and_a_killed_job_reruns_alone(cluster, tmp_path):
 
     # the rerun: exactly the killed cell and Table 5, nothing else touched
     dry = snakemake(wd, TARGET, "-n", *TINY).stdout
-    counts = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", dry, re.M)}
+    counts = job_counts(dry)
     assert counts == {"train": 1, "table5": 1, "total": 2}
     assert VICTIM_DIR in dry
     before = mtimes(wd)

@@ -15,7 +15,7 @@ from denali_pipe.objects import load_catalogue
 from denali_pipe.transforms import FIDELITIES
 from denali_pipe.twin.render import read_twin
 
-from workflow import copy_workflow, snakemake
+from workflow import copy_workflow, job_counts, snakemake
 
 pytestmark = pytest.mark.e2e
 TINY = ("--configfile", "config/presets/tiny.yaml")
@@ -99,7 +99,7 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     preset = wd / "config/presets/tiny.yaml"
     preset.write_text(preset.read_text().replace("generalization1white]", "generalization1white, newplus]"))
     out = snakemake(wd, "-n", *TINY).stdout
-    jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
+    jobs = job_counts(out)
     # the new object: 2 sizes x 2 resolutions x 2 lightings; twins per object x size
     own = {"rig": 2, "ingest": 8, "poses": 8, "preprocess": 4, "twin": 2}
     aggregates = {"index": 1, "table4": 1, "table6": 1, "detections": 1, "dataset": 1, "render_benchmark": 1, "fig18": 1, "transforms": 1, "fig9": 1, "all": 1}
@@ -140,7 +140,7 @@ def test_rig_examples_show_the_bump(tiny_run):
 
 def test_paper_preset_dag_builds(tiny_run):
     out = snakemake(tiny_run, "-n", "--quiet", "rules", "--configfile", "config/presets/paper.yaml").stdout
-    counts = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
+    counts = job_counts(out)
     # one rig job per object x size (67) plus the two background kinds
     assert counts["rig"] == 30 * 2 + 3 + 2 * 2 + 2
     assert counts["total"] <= 2000  # the scale target; scripts/bench_dag.py prints the build time
@@ -207,7 +207,7 @@ def test_changing_one_models_hyperparameters_reruns_only_its_cells_and_tables(ti
     cfg = tmp_path / "lr.yaml"
     cfg.write_text("train:\n  hyper:\n    mlp:\n      location: {lr: 0.002}\n")
     out = snakemake(tiny_run, "-n", "--configfile", "config/presets/tiny.yaml", str(cfg)).stdout
-    jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
+    jobs = job_counts(out)
     assert jobs == {"train": 1, "table2": 1, "table10": 1, "speed_vs_accuracy": 1, "all": 1, "total": 5}
     assert "mlp_location" in out
 
@@ -256,12 +256,12 @@ def test_renderer_settings_rerun_only_what_uses_them(tiny_run, tmp_path):
     # the analytic twins do not use mitransient's spp; the benchmark does
     preset.write_text(text.replace("twin:\n", "twin:\n  mitransient:\n    spp: 1234\n"))
     out = snakemake(wd, "-n", *TARGETS, *TINY).stdout
-    jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
+    jobs = job_counts(out)
     assert jobs == {"render_benchmark": 1, "total": 1}
     # the object albedo changes every twin, so Fig 18 too
     preset.write_text(text.replace("twin:\n", "twin:\n  object_albedo: 0.6\n"))
     out = snakemake(wd, "-n", *TARGETS, *TINY).stdout
-    jobs = {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, re.M)}
+    jobs = job_counts(out)
     assert jobs["twin"] == 2 and jobs["fig18"] == 1 and jobs["render_benchmark"] == 1
 
 
