@@ -36,6 +36,7 @@ from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE
 from denali_pipe.objects import BACKGROUND_SIZE, ObjectSpec
 from denali_pipe.rig.frames import frame_tags, render_frame
 from denali_pipe.rig.histograms import Photometry, Scatterer, counts_from_transport, sample_counts, transport
+from denali_pipe.rig.nuisances import SetNuisance, capture_conditions, draw_set, gantry_offset
 from denali_pipe.rig.scene import mount_scatterer, object_scatterer
 from denali_pipe.seeds import rng_for
 
@@ -82,8 +83,10 @@ def metadata_record(cs: CaptureSet, locations: np.ndarray, rig_cfg: dict) -> dic
 
 
 def truth_record(cs: CaptureSet, spec: ObjectSpec | None, locations: np.ndarray, config: dict) -> dict:
-    """Every true parameter of the set. For validation only: no stage reads it."""
+    """Every true parameter of the set, the nuisances drawn included. For
+    validation only: no stage reads it."""
     rig = config["rig"]
+    nuisance = draw_set(rig["nuisances"], config["seed"], cs.name)
     return {
         "set": cs.name,
         "seed": config["seed"],
@@ -91,40 +94,56 @@ def truth_record(cs: CaptureSet, spec: ObjectSpec | None, locations: np.ndarray,
         "material": None if spec is None else dataclasses.asdict(spec.material_params),
         "mount_post": cs.object != "NOOBJECTMOUNT",
         "photometry": rig["photometry"],
+        "nuisances": {"config": rig["nuisances"], "set": nuisance.to_dict()},
         "firmware": dataclasses.asdict(geo.FIRMWARE[cs.resolution]),
         "sensor": {"position": geo.SENSOR_POSITION.tolist(), "forward": geo.SENSOR_FORWARD.tolist(), "fov_deg": list(geo.SENSOR_FOV_DEG)},
         "wall": {"centre": geo.WALL.centre.tolist(), "size": list(geo.WALL.size), "normal": geo.WALL.normal.tolist()},
         "cameras": {name: _camera_record(cam) for name, cam in _cameras(rig).items()},
         "static_tags": {str(i): p.to_dict() for i, p in geo.STATIC_TAGS.items()},
-        "locations": {
-            str(int(k)): {
-                "tag1": geo.tag1_pose(int(k)).to_dict(),
-                "object": geo.object_pose(int(k)).to_dict(),
-                "wall_distance_m": float(geo.wall_distance(geo.object_pose(int(k)).t)),
-            }
-            for k in locations
-        },
+        "locations": {str(int(k)): _location_truth(cs, int(k), nuisance, config) for k in locations},
     }
 
 
-def _scenes(cs: CaptureSet, spec: ObjectSpec | None, config: dict) -> Iterator[tuple[int, list[Scatterer]]]:
-    """(gantry location, hidden scene) for every location the config asks for."""
-    for k in map(int, geo.select_locations(config["rig"]["n_locations"])):
-        scene = [] if cs.object == "NOOBJECTMOUNT" else [mount_scatterer(k)]
-        if spec is not None:
-            scene.append(object_scatterer(spec, cs.size, k))
-        yield k, scene
+def _location_truth(cs: CaptureSet, k: int, nuisance: SetNuisance, config: dict) -> dict:
+    nuisances, seed = config["rig"]["nuisances"], config["seed"]
+    offset = gantry_offset(nuisances, seed, cs.name, k)
+    obj = nuisance.object_pose(k, offset)
+    return {
+        "tag1": frame_tags(k, "tracking", tuple(offset))[geo.OBJECT_TAG_ID].to_dict(),
+        "object": obj.to_dict(),
+        "gantry_offset_m": offset.tolist(),
+        "time_shift_bins": [capture_conditions(nuisances, seed, cs.name, k, r, nuisance).time_shift_bins for r in range(config["rig"]["repeats"])],
+        "wall_distance_m": float(geo.wall_distance(obj.t)),
+    }
 
 
-def _record(cs: CaptureSet, k: int, light: np.ndarray, config: dict) -> dict:
-    """One location of one set: the histograms of every repeat and both cameras' RGB-D frames.
-    `light` is the scene's transport at the set's resolution."""
-    rig = config["rig"]
+def _scene(cs: CaptureSet, spec: ObjectSpec | None, k: int, offset: np.ndarray, nuisance: SetNuisance) -> list[Scatterer]:
+    """The hidden scene of set `cs` at gantry location `k`, the carriage moved by `offset` (m)."""
+    obj = nuisance.object_pose(k, offset)
+    scene = [] if cs.object == "NOOBJECTMOUNT" else [mount_scatterer(obj.t)]
+    if spec is not None:
+        scene.append(object_scatterer(spec, cs.size, obj))
+    return scene
+
+
+def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisance, config: dict) -> dict:
+    """One location of one set: the histograms of every repeat and both cameras' RGB-D frames."""
+    rig, seed = config["rig"], config["seed"]
     phot = Photometry.from_config(rig["photometry"])
-    mean = counts_from_transport(cs.resolution, cs.light_on, light, phot)
-    hist = np.stack([sample_counts(mean, phot, rng_for(config["seed"], cs.name, k, r)) for r in range(rig["repeats"])])
+    offset = gantry_offset(rig["nuisances"], seed, cs.name, k)
+    light = transport(cs.resolution, _scene(cs, spec, k, offset, nuisance))
+    hist = np.stack(
+        [
+            sample_counts(
+                counts_from_transport(cs.resolution, cs.light_on, light, phot, capture_conditions(rig["nuisances"], seed, cs.name, k, r, nuisance)),
+                phot,
+                rng_for(seed, cs.name, k, r),
+            )
+            for r in range(rig["repeats"])
+        ]
+    )
     frames = {
-        name: render_frame(cam, frame_tags(k, name), cs.light_on, rng_for(config["seed"], cs.name, k, name))
+        name: render_frame(cam, frame_tags(k, name, tuple(offset)), cs.light_on, rng_for(seed, cs.name, k, name))
         for name, cam in _cameras(rig).items()
     }
     return {"iter": k, "histogram": hist, "frames": frames}
@@ -133,8 +152,8 @@ def _record(cs: CaptureSet, k: int, light: np.ndarray, config: dict) -> dict:
 def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, outs: list[Path], fmt: str) -> None:
     """Write capture sets of one object and size (any resolutions and lightings)
     to `outs`: release folders (fmt `release`) or pickle streams (fmt `pickle`).
-    Each output is written atomically; the light transport of a location is
-    computed once per resolution and shared by both lightings."""
+    Each output is written atomically. Every set is its own mounting and
+    session (`rig.nuisances`), so each computes its own light transport."""
     if len({(s.object, s.size) for s in sets}) != 1:
         raise ValueError(f"synth_sets takes sets of one object and size, got {[s.name for s in sets]}")
     if len(outs) != len(sets):
@@ -147,12 +166,12 @@ def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, ou
             raise ValueError(f"capture set {cs.name}: background sets are captured at {BACKGROUND_SIZE} only")
     locations = geo.select_locations(config["rig"]["n_locations"])
     writer = {"release": _ReleaseWriter, "pickle": _PickleWriter}[fmt]
+    nuisances = {cs.name: draw_set(config["rig"]["nuisances"], config["seed"], cs.name) for cs in sets}
     with ExitStack() as stack:
         writers = [stack.enter_context(writer(out, metadata_record(cs, locations, config["rig"]))) for cs, out in zip(sets, outs)]
-        for k, scene in _scenes(sets[0], spec, config):
-            light = {res: transport(res, scene) for res in sorted({cs.resolution for cs in sets})}
+        for k in map(int, locations):
             for cs, w in zip(sets, writers):
-                w.add(_record(cs, k, light[cs.resolution], config))
+                w.add(_record(cs, spec, k, nuisances[cs.name], config))
         for cs, w in zip(sets, writers):
             w.finish(truth_record(cs, spec, locations, config))
 

@@ -262,15 +262,17 @@ def _background(camera: Camera) -> _Background:
 # --- tags ------------------------------------------------------------------------------
 
 
-def frame_tags(location: int, camera_name: str) -> dict[int, Pose]:
+def frame_tags(location: int, camera_name: str, gantry_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> dict[int, Pose]:
     """Tags present in a frame at gantry `location` (0..99): every static tag
-    plus the object tag 1 at `tag1_pose(location)`. The same set serves both
-    cameras; the renderer skips whatever a camera cannot see."""
+    plus the object tag 1 at `tag1_pose(location)` moved by the carriage's
+    `gantry_offset` (m, world). The same set serves both cameras; the
+    renderer skips whatever a camera cannot see."""
     if camera_name not in (g.TRACKING_CAMERA.name, g.COLOCATED_CAMERA.name):
         raise ValueError(f"unknown camera {camera_name!r}")
     if not 0 <= int(location) < g.N_LOCATIONS:
         raise ValueError(f"gantry location must be 0..{g.N_LOCATIONS - 1}, got {location}")
-    return {**g.STATIC_TAGS, g.OBJECT_TAG_ID: g.tag1_pose(int(location))}
+    tag1 = g.tag1_pose(int(location))
+    return {**g.STATIC_TAGS, g.OBJECT_TAG_ID: Pose(tag1.R, tag1.t + np.asarray(gantry_offset, float))}
 
 
 def _draw_tag(

@@ -9,15 +9,22 @@ sensor-relative optical path length (OPL):
   material, a retroreflective lobe. The lobe sends light back toward where it
   came from, so in the narrow-lobe limit p = q and its path is
   2 |s - q| + 2 |q - o|: an O x Q sum instead of the diffuse part's P x O x Q;
-- ambient light (lights on) and dark counts, a flat floor per bin;
-- an exGaussian pulse (Gaussian jitter with an exponential SPAD tail), a
-  pile-up nonlinearity, Poisson shot noise and Gaussian read noise.
+- ambient light (lights on) and dark counts, a floor per bin. Room light
+  reaches each wall patch from the whole room; hidden scatterers block the
+  share of it they subtend (`Transport.ambient`), so with lights on the
+  floor of the zones near the object carries its silhouette;
+- the instrument response: a pulse (Gaussian jitter, a fast exponential SPAD
+  tail and a slow tail of carrier diffusion and laser afterglow), then the
+  response nonlinearity of a zone (`respond`): SPAD dead time, which lowers
+  every bin after a strong return, and the saturation of the zone's pulse
+  combiner, which flattens the direct peak; Poisson shot noise and Gaussian
+  read noise.
 
 Radiometry is relative: the laser is a point source of unit intensity over the
 field of view, so every transport term is in the same (arbitrary) unit, and one
 gain, calibrated on the direct-return peak of the centre 3x3 zone, turns it
-into counts. Counts scale with the firmware's iterations and, for the flat
-floor, with each zone's solid angle, so 8x8 zones carry far fewer photons.
+into counts. Counts scale with the firmware's iterations and, for the floor,
+with each zone's solid angle, so 8x8 zones carry far fewer photons.
 Nothing here knows object labels: signal depends on shape, size, material and
 location only through the scatterer points handed in.
 """
@@ -28,6 +35,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+
+from scipy.special import log_ndtr, ndtr
 
 from denali_pipe import geometry as geo
 
@@ -42,19 +51,49 @@ LASER_SAMPLES = 4
 @dataclass(frozen=True)
 class Photometry:
     """Sensor response, stated for one 3x3 zone at the 3x3 firmware's
-    iterations (counts per bin unless noted)."""
+    iterations (counts per bin unless noted; `config/config.yaml` gives the
+    basis of each value).
+
+    direct_peak_counts: the centre zone's direct-return peak above the floor
+        before the response nonlinearity (the photon flux; sets the gain).
+    dark_counts, ambient_counts: the floor per bin, lights off and the extra
+        with lights on, before the nonlinearity.
+    pulse_sigma_bins, pulse_tail_bins: Gaussian jitter and fast SPAD tail.
+    slow_tail_bins, slow_tail_fraction: time constant and energy share of the
+        slow tail (carrier diffusion, laser afterglow).
+    saturation_counts: counts per bin at which the zone's pulse combiner
+        saturates (s in s (1 - exp(-x / s))).
+    dead_time_counts: counts after which a zone's later bins keep 1/e of
+        their photons (its SPADs fire once per laser cycle: SPADs per zone
+        x cycles, in the firmware's count units).
+    read_noise_counts: Gaussian read noise on top of Poisson shot noise.
+    """
 
     direct_peak_counts: float
     dark_counts: float
     ambient_counts: float
     pulse_sigma_bins: float
     pulse_tail_bins: float
+    slow_tail_bins: float
+    slow_tail_fraction: float
     saturation_counts: float
+    dead_time_counts: float
     read_noise_counts: float
 
     @classmethod
     def from_config(cls, d: dict) -> "Photometry":
         return cls(**{k: float(d[k]) for k in cls.__dataclass_fields__})
+
+
+@dataclass(frozen=True)
+class Conditions:
+    """Operating conditions of one capture (the campaign's nuisances,
+    `rig.nuisances`): laser power and room light relative to nominal, and the
+    capture's clock offset in bins (positive = later)."""
+
+    power_gain: float = 1.0
+    ambient_gain: float = 1.0
+    time_shift_bins: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -115,13 +154,26 @@ def _splat(hist: np.ndarray, zone: np.ndarray, opl: np.ndarray, weight: np.ndarr
     hist += flat.reshape(nz, width)[:, 1 : nb + 1]
 
 
-def transport(resolution: str, scatterers: list[Scatterer]) -> np.ndarray:
-    """Noise-free, pulse-free light transport (Z, N_BINS) in relative units:
-    the direct wall return plus every scatterer's three-bounce return."""
+@dataclass(frozen=True)
+class Transport:
+    """Noise-free, pulse-free light transport of one scene at one resolution.
+
+    hist: (Z, N_BINS) the direct wall return plus every scatterer's
+        three-bounce return, relative units;
+    ambient: (Z,) share of the room light that still reaches each zone's
+        wall patch (1 without scatterers)."""
+
+    hist: np.ndarray
+    ambient: np.ndarray
+
+
+def transport(resolution: str, scatterers: list[Scatterer]) -> Transport:
+    """The scene's light transport: laser returns and room-light occlusion."""
     ws = wall_samples(resolution)
     nz, ns = ws.r.shape
     rho_w = geo.WALL_ALBEDO
     hist = np.zeros((nz, geo.N_BINS))
+    blocked = np.zeros(nz * ns)
     zone = np.repeat(np.arange(nz), ns)
     q, r_q = ws.q.reshape(-1, 3), ws.r.reshape(-1)
     # radiance of q toward the sensor per unit irradiance, times the ray cell's solid angle
@@ -136,13 +188,20 @@ def transport(resolution: str, scatterers: list[Scatterer]) -> np.ndarray:
         cos_q = -(d_oq @ nw) / dist
         # geometry term o -> q times the area of o; back faces contribute nothing
         g_oq = np.clip(cos_o, 0, None) * np.clip(cos_q, 0, None) / dist**2 * sc.area[:, None]
+        # room light (a uniform diffuse room) reaching q, blocked by o in
+        # proportion to o's projected solid angle over pi, minus what o's
+        # Lambertian part reflects back (its retroreflected share returns
+        # to the lamps, not to the wall)
+        blocked += (1.0 - sc.rho_diffuse) * g_oq.sum(0) / np.pi
         if sc.rho_retro > 0:
             radiance_in = (rho_w / np.pi) * ws.irradiance.reshape(-1)  # L(q -> o)
             w = sc.rho_retro * radiance_in[None, :] * g_oq * seen[None, :]
             _splat(hist, np.broadcast_to(zone, w.shape).ravel(), (2 * r_q + 2 * dist).ravel(), w.ravel())
         if sc.rho_diffuse > 0:
             _add_diffuse(hist, zone, r_q, seen, g_oq, dist, sc)
-    return hist
+    omega = ws.omega.reshape(nz, ns)
+    ambient = (omega * (1.0 - np.clip(blocked.reshape(nz, ns), 0.0, 1.0))).sum(1) / omega.sum(1)
+    return Transport(hist, ambient)
 
 
 def _add_diffuse(hist, zone, r_q, seen, g_oq, d_oq, sc: Scatterer) -> None:
@@ -166,51 +225,82 @@ def _add_diffuse(hist, zone, r_q, seen, g_oq, d_oq, sc: Scatterer) -> None:
         _splat(hist, zones, opl, (radiance_o[ip][:, None] * w_oq).ravel())
 
 
-@lru_cache(maxsize=None)
-def pulse_matrix(sigma_bins: float, tail_bins: float) -> np.ndarray:
-    """(N_BINS, N_BINS) matrix M with hist @ M = hist convolved with the
-    unit-area exGaussian pulse (delay 0 at the Gaussian's centre)."""
-    t = np.arange(-geo.N_BINS + 1, geo.N_BINS, dtype=float)
-    x = t[:, None] + np.linspace(-0.5, 0.5, 11)[None, :]  # integrate over each bin
-    delay = np.arange(0, 12 * tail_bins, 0.1)  # exponential tail, numerically convolved
-    shape = np.exp(-0.5 * ((x[..., None] - delay) / sigma_bins) ** 2) @ np.exp(-delay / tail_bins)
-    shape = shape.mean(-1)
-    shape = shape / shape.sum()
+
+
+def pulse_kernel(phot: Photometry, shift_bins: float = 0.0) -> np.ndarray:
+    """The unit-area pulse integrated over each bin, (2 N_BINS - 1,) for
+    delays -(N_BINS - 1)..N_BINS - 1 bins, delay 0 at the Gaussian's centre
+    when `shift_bins` is 0: a mixture of two exponentially modified
+    Gaussians (one jitter, a fast and a slow tail), in closed form from
+    their CDFs, so a sub-bin shift costs nothing and leaves no interpolation
+    pattern in the bins."""
+    edges = np.arange(-geo.N_BINS + 0.5, geo.N_BINS, 1.0) - shift_bins
+    sigma = phot.pulse_sigma_bins
+
+    def cdf(t: np.ndarray, tau: float) -> np.ndarray:
+        # exGaussian CDF: Phi(t/s) - exp(s^2 / 2 tau^2 - t / tau) Phi(t/s - s/tau), in logs for stability
+        return ndtr(t / sigma) - np.exp(sigma**2 / (2 * tau**2) - t / tau + log_ndtr(t / sigma - sigma / tau))
+
+    f = phot.slow_tail_fraction
+    c = (1 - f) * cdf(edges, phot.pulse_tail_bins) + f * cdf(edges, phot.slow_tail_bins)
+    k = np.diff(c)
+    return k / k.sum()
+
+
+def _convolve(hist: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """(Z, N_BINS) hist convolved with a `pulse_kernel`, same bins (causal in the delay)."""
     i = np.arange(geo.N_BINS)
-    return shape[(i[None, :] - i[:, None]) + geo.N_BINS - 1]
+    return hist @ kernel[(i[None, :] - i[:, None]) + geo.N_BINS - 1]
+
+
+def respond(x: np.ndarray, saturation: float, dead: np.ndarray | float) -> np.ndarray:
+    """A zone's counts (..., N_BINS) from its expected photon counts x.
+
+    SPAD dead time: each of the zone's SPADs registers at most one photon
+    per laser cycle, so a bin keeps exp(-counts before it / dead) of its
+    photons (first-photon pile-up, `dead` = SPADs x cycles in counts): the
+    floor after a strong direct return sits below the floor before it. The
+    zone's pulse combiner then registers at most about one event per bin
+    per cycle: counts saturate as s (1 - exp(-x / s)) with s = `saturation`,
+    flattening the direct peak."""
+    before = np.cumsum(x, axis=-1) - x
+    detected = dead * -np.expm1(-x / dead) * np.exp(-before / dead)
+    return saturation * -np.expm1(-detected / saturation)
 
 
 def _gain(phot: Photometry) -> float:
     """Counts per unit transport so that the centre 3x3 zone's direct peak is
-    `direct_peak_counts` above the floor."""
-    return phot.direct_peak_counts / _direct_peak(phot.pulse_sigma_bins, phot.pulse_tail_bins)
+    `direct_peak_counts` above the floor, before the nonlinearity."""
+    return phot.direct_peak_counts / _direct_peak(phot)
 
 
 @lru_cache(maxsize=None)
-def _direct_peak(sigma: float, tail: float) -> float:
-    h = transport(geo.REFERENCE_RESOLUTION, []) @ pulse_matrix(sigma, tail)
+def _direct_peak(phot: Photometry) -> float:
+    h = _convolve(transport(geo.REFERENCE_RESOLUTION, []).hist, pulse_kernel(phot))
     return float(h[len(h) // 2].max())
 
 
-def expected_counts(resolution: str, light_on: bool, scatterers: list[Scatterer], phot: Photometry) -> np.ndarray:
+def expected_counts(resolution: str, light_on: bool, scatterers: list[Scatterer], phot: Photometry, conditions: Conditions = Conditions()) -> np.ndarray:
     """Expected counts (n, n, N_BINS) float64, before noise."""
-    return counts_from_transport(resolution, light_on, transport(resolution, scatterers), phot)
+    return counts_from_transport(resolution, light_on, transport(resolution, scatterers), phot, conditions)
 
 
-def counts_from_transport(resolution: str, light_on: bool, light: np.ndarray, phot: Photometry) -> np.ndarray:
-    """Expected counts (n, n, N_BINS) from a `transport` result (Z, N_BINS):
-    pulse, gain, floor and pile-up. Lightings share one transport."""
+def counts_from_transport(resolution: str, light_on: bool, light: Transport, phot: Photometry, conditions: Conditions = Conditions()) -> np.ndarray:
+    """Expected counts (n, n, N_BINS) from a `transport` result: pulse,
+    gain, floor and the response nonlinearity, under one capture's
+    `conditions`. Lightings share one transport."""
     n = geo.RESOLUTIONS[resolution]
     fw, ref = geo.FIRMWARE[resolution], geo.FIRMWARE[geo.REFERENCE_RESOLUTION]
     iters = fw.kilo_iterations / ref.kilo_iterations
     ref_zone = wall_samples(geo.REFERENCE_RESOLUTION).zone_omega.mean()
-    floor_per_zone = wall_samples(resolution).zone_omega / ref_zone
-    signal = light @ pulse_matrix(phot.pulse_sigma_bins, phot.pulse_tail_bins)
-    floor = phot.dark_counts + (phot.ambient_counts if light_on else 0.0)
-    x = iters * (_gain(phot) * signal + floor * floor_per_zone[:, None])
-    # pile-up: a SPAD registers at most one photon per pulse, so the counts saturate
-    sat = iters * phot.saturation_counts
-    return (sat * -np.expm1(-x / sat)).reshape(n, n, geo.N_BINS)
+    zone_size = wall_samples(resolution).zone_omega / ref_zone
+    signal = _convolve(light.hist, pulse_kernel(phot, conditions.time_shift_bins))
+    floor = phot.dark_counts + (phot.ambient_counts * conditions.ambient_gain * light.ambient if light_on else 0.0)
+    x = iters * (conditions.power_gain * _gain(phot) * signal + (floor * zone_size)[:, None])
+    # a zone's SPADs (hence its dead-time budget) scale with its solid angle;
+    # its combiner's events per cycle do not, only the firmware's cycles
+    counts = respond(x, iters * phot.saturation_counts, iters * phot.dead_time_counts * zone_size[:, None])
+    return counts.reshape(n, n, geo.N_BINS)
 
 
 def sample_counts(expected: np.ndarray, phot: Photometry, rng: np.random.Generator) -> np.ndarray:

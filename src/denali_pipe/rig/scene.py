@@ -17,24 +17,25 @@ def _object_samples(spec: ObjectSpec, size: str) -> tuple[np.ndarray, np.ndarray
     return front_samples(object_mesh(spec, size), sample_spacing(size))
 
 
-def object_scatterer(spec: ObjectSpec, size: str, location: int) -> Scatterer:
-    """The object's wall-facing face at a gantry location."""
+def object_scatterer(spec: ObjectSpec, size: str, pose: geo.Pose) -> Scatterer:
+    """The object's wall-facing face at `pose` (object frame -> world, e.g.
+    `geometry.object_pose(location)`)."""
     points, area = _object_samples(spec, size)
     material = spec.material_params
-    pose = geo.object_pose(location)
     normal = pose.R @ np.array([0.0, 0.0, -1.0])  # local -z faces the wall
     return Scatterer(pose.apply(points), np.tile(normal, (len(points), 1)), area, material.rho_diffuse, material.rho_retro)
 
 
-def mount_scatterer(location: int) -> Scatterer:
-    """The front face of the mount post, from the mount point down to the table.
+def mount_scatterer(mount_point: np.ndarray) -> Scatterer:
+    """The front face of the mount post, from `mount_point` (3,) world (the
+    object frame's origin) down to the table.
     Occlusion of the post by the object is not modelled: it is static per
     location and removed by background subtraction."""
     w, h, _ = geo.MOUNT_POST_SIZE
     xs = np.arange(-w / 2 + MOUNT_SPACING / 2, w / 2, MOUNT_SPACING)
     zs = -np.arange(MOUNT_SPACING / 2, h, MOUNT_SPACING)
     X, Z = np.meshgrid(xs, zs)
-    top = geo.object_pose(location).t
+    top = np.asarray(mount_point, float)
     points = top + np.stack([X.ravel(), np.zeros(X.size), Z.ravel()], 1)
     normals = np.tile(-geo.WALL.normal, (len(points), 1))
     area = np.full(len(points), (w / len(xs)) * MOUNT_SPACING)

@@ -1,0 +1,96 @@
+"""The numbers that describe a raw centre-zone histogram, measured the way
+REFERENCE Part 4 reads them off the release's figures of real captures, so
+the rig can be held against them (`report/rig_vs_real.py`, the physics tests).
+
+All inputs are counts per bin, (N_BINS,) float; bins are indices 0..127.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+# The pre-peak floor: bins from FLOOR_START to FLOOR_GAP bins before the direct
+# peak (the first bins and the peak's rising edge left out).
+FLOOR_START = 2
+FLOOR_GAP = 8
+# The late floor: the last LATE_BINS bins (the figures read "by bin 128").
+LATE_BINS = 8
+# The three-bounce bump is searched this many bins after the direct peak:
+# the hidden object is at least ~0.25 m from the wall, ~20 bins of path.
+BUMP_AFTER_PEAK = 15
+
+
+@dataclass(frozen=True)
+class CentreZone:
+    """floor_before, floor_after, direct_peak, bump_excess: counts per bin;
+    bump_bin, direct_bin: bin indices; bump_fwhm: bins (NaN without a bump)."""
+
+    floor_before: float
+    floor_after: float
+    direct_peak: float
+    direct_bin: int
+    bump_excess: float
+    bump_bin: int
+    bump_fwhm: float
+
+    @property
+    def floor_fraction(self) -> float:
+        """Pre-peak floor over the direct peak."""
+        return self.floor_before / self.direct_peak
+
+    @property
+    def bump_fraction(self) -> float:
+        """Bump excess over the direct peak."""
+        return self.bump_excess / self.direct_peak
+
+    @property
+    def bump_over_floor(self) -> float:
+        return self.bump_excess / self.floor_before
+
+    def to_dict(self) -> dict:
+        return {
+            **dataclasses.asdict(self),
+            "floor_fraction": self.floor_fraction,
+            "bump_fraction": self.bump_fraction,
+            "bump_over_floor": self.bump_over_floor,
+        }
+
+
+def fwhm(excess: np.ndarray, at: int) -> float:
+    """Full width at half maximum (bins) of the peak of `excess` at bin `at`,
+    half-maximum crossings interpolated linearly between bins."""
+    half = excess[at] / 2
+    lo = at
+    while lo > 0 and excess[lo - 1] > half:
+        lo -= 1
+    hi = at
+    while hi < len(excess) - 1 and excess[hi + 1] > half:
+        hi += 1
+    left = lo - (excess[lo] - half) / (excess[lo] - excess[lo - 1]) if lo > 0 else float(lo)
+    right = hi + (excess[hi] - half) / (excess[hi] - excess[hi + 1]) if hi < len(excess) - 1 else float(hi)
+    return float(right - left)
+
+
+def measure(capture: np.ndarray, background: np.ndarray) -> CentreZone:
+    """Measure one raw capture against the background at the same location
+    (the mean over its repeats, or its expectation): floors and direct peak
+    from the capture, the bump from capture minus background."""
+    capture = np.asarray(capture, float)
+    direct_bin = int(np.argmax(capture))
+    floor_before = float(capture[FLOOR_START : max(direct_bin - FLOOR_GAP, FLOOR_START + 1)].mean())
+    excess = capture - np.asarray(background, float)
+    start = direct_bin + BUMP_AFTER_PEAK
+    bump_bin = start + int(np.argmax(excess[start:]))
+    bump = float(excess[bump_bin])
+    return CentreZone(
+        floor_before=floor_before,
+        floor_after=float(capture[-LATE_BINS:].mean()),
+        direct_peak=float(capture[direct_bin]),
+        direct_bin=direct_bin,
+        bump_excess=bump,
+        bump_bin=bump_bin,
+        bump_fwhm=fwhm(excess, bump_bin) if bump > 0 else float("nan"),
+    )

@@ -1,0 +1,30 @@
+"""Centre-zone measurements, on histograms whose answers are known."""
+
+import numpy as np
+import pytest
+
+from denali_pipe.rig.measure import fwhm, measure
+
+
+def gaussian(b, centre, sigma, height):
+    return height * np.exp(-0.5 * ((b - centre) / sigma) ** 2)
+
+
+def test_measure_reads_floors_peak_and_bump():
+    b = np.arange(128.0)
+    background = np.where(b < 50, 200.0, 100.0) + gaussian(b, 45, 1.5, 10000)
+    capture = background + gaussian(b, 100, 2.0, 500)
+    m = measure(capture, background)
+    assert m.floor_before == pytest.approx(200, rel=1e-6)
+    assert m.floor_after == pytest.approx(100, rel=1e-6)
+    assert m.direct_bin == 45 and m.direct_peak == pytest.approx(10200, rel=1e-3)
+    assert m.bump_bin == 100 and m.bump_excess == pytest.approx(500)
+    assert m.bump_fwhm == pytest.approx(2 * np.sqrt(2 * np.log(2)) * 2.0, rel=0.05)
+    assert m.bump_over_floor == pytest.approx(2.5)
+    assert m.bump_fraction == pytest.approx(500 / 10200, rel=1e-3)
+
+
+def test_fwhm_of_a_box():
+    x = np.zeros(20)
+    x[8:12] = 1.0
+    assert fwhm(x, 9) == pytest.approx(4.0)
