@@ -20,6 +20,7 @@ include: "rules/fit.smk"
 rule all:
     input:
         "results/rig_examples.png",
+        "results/rig_vs_real.png",
         "results/index/captures.parquet",
         "results/table4.csv",
         "results/table6.csv",

@@ -96,6 +96,18 @@ def example_pairs():
     return [(store(s.name), store(background_of(s).name)) for s in picks.values()]
 
 
+def rig_vs_real_pairs():
+    """The 3x3 sets of one object (the plain square where captured, else the
+    first base shape, else the first base object) at both sizes, lights off
+    then on, each with its NOOBJECT background."""
+    base = [s for s in SETS if not s.is_background and s.resolution == "3x3" and CATALOGUE[s.object].variant == "base"]
+    if not base:
+        raise ValueError("rig_vs_real needs 3x3 sets of a base object (config `objects`, `resolutions`)")
+    obj = min((s.object for s in base), key=lambda o: (o != "square", CATALOGUE[o].type != "shape", o))
+    picks = sorted((s for s in base if s.object == obj), key=lambda s: (s.light != "lightoff", s.size != "8inch"))
+    return [(store(s.name), store(background_of(s).name)) for s in picks]
+
+
 # --- poses -------------------------------------------------------------------
 
 

@@ -39,3 +39,18 @@ rule rig_examples:
         "../envs/denali.yaml"
     shell:
         "denali rig-examples --sets {input.sets} --backgrounds {input.backgrounds} --out {output.png} > {log} 2>&1"
+
+
+rule rig_vs_real:
+    input:
+        sets=[obj for obj, _ in rig_vs_real_pairs()],
+        backgrounds=[bg for _, bg in rig_vs_real_pairs()],
+    output:
+        png=report("results/rig_vs_real.png", caption="../report/rig_vs_real.rst", category="1. Captures"),
+        csv="results/rig_vs_real.csv",
+    log:
+        "logs/rig_vs_real.log",
+    conda:
+        "../envs/denali.yaml"
+    shell:
+        "denali rig-vs-real --sets {input.sets} --backgrounds {input.backgrounds} --png {output.png} --csv {output.csv} > {log} 2>&1"

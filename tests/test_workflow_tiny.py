@@ -138,6 +138,19 @@ def test_rig_examples_show_the_bump(tiny_run):
     assert inside > 10 and inside > outside + 10
 
 
+def test_rig_vs_real_measures_the_centre_zone(tiny_run):
+    df = pd.read_csv(tiny_run / "results/rig_vs_real.csv")
+    rig = df[df.source == "capture source"]
+    # tiny: circle (the first base shape) at both sizes, both lightings, beside three real figures
+    assert sorted(rig.set) == sorted(f"circle_{size}_3x3_{light}" for size in ("4inch", "8inch") for light in ("lighton", "lightoff"))
+    assert df.source.str.startswith("real").sum() == 3
+    off = rig.set_index("set")
+    big, small = off.loc["circle_8inch_3x3_lightoff"], off.loc["circle_4inch_3x3_lightoff"]
+    assert 0.01 < big.floor_fraction < 0.1 and big.late_over_floor < 1
+    assert big.bump_excess > small.bump_excess > 0
+    assert (tiny_run / "results/rig_vs_real.png").stat().st_size > 10_000
+
+
 def test_paper_preset_dag_builds(tiny_run):
     out = snakemake(tiny_run, "-n", "--quiet", "rules", "--configfile", "config/presets/paper.yaml").stdout
     counts = job_counts(out)
@@ -278,7 +291,7 @@ def test_transforms_and_fig9(tiny_run):
 
 
 REPORTED = (
-    "rig_examples.png", "table4.csv", "table6.csv", "fig12.png", "detections.csv", "table5.csv", "table2.csv", "table10.csv",
+    "rig_examples.png", "rig_vs_real.png", "table4.csv", "table6.csv", "fig12.png", "detections.csv", "table5.csv", "table2.csv", "table10.csv",
     "fig16.png", "fig17.png", "speed_vs_accuracy.png", "render_benchmark.png", "fig18.png", "transforms.json", "fig9.png",
 )  # fmt: skip
 

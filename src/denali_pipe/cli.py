@@ -319,6 +319,15 @@ def cmd_rig_examples(args: argparse.Namespace) -> None:
     log.info("wrote %s", args.out)
 
 
+def cmd_rig_vs_real(args: argparse.Namespace) -> None:
+    from denali_pipe.report.rig_vs_real import rig_vs_real
+
+    if len(args.sets) != len(args.backgrounds):
+        raise ValueError(f"rig-vs-real: {len(args.sets)} sets but {len(args.backgrounds)} backgrounds")
+    rig_vs_real(list(zip(map(Path, args.sets), map(Path, args.backgrounds))), Path(args.png), Path(args.csv))
+    log.info("wrote %s and %s", args.png, args.csv)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="denali", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="verb", required=True)
@@ -455,6 +464,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--backgrounds", nargs="+", required=True, help="the matching NOOBJECT set stores, in the same order")
     s.add_argument("--out", required=True, help="PNG path; the plotted data goes beside it as CSV")
     s.set_defaults(func=cmd_rig_examples)
+
+    s = sub.add_parser("rig-vs-real", help="measure raw centre-zone histograms against the real captures' figures")
+    s.add_argument("--sets", nargs="+", required=True, help="3x3 object capture-set stores (<set>.zarr)")
+    s.add_argument("--backgrounds", nargs="+", required=True, help="the matching NOOBJECT set stores, in the same order")
+    s.add_argument("--png", required=True, help="the figure")
+    s.add_argument("--csv", required=True, help="the measured numbers beside the real figures'")
+    s.set_defaults(func=cmd_rig_vs_real)
     return p
 
 

@@ -64,3 +64,15 @@ _TABLE10_ROWS = {
     ("transformer", "size"): (3228802, 25200, 0.1261, 10, 256, 10800, 0.0006),
 }
 TABLE10 = {key: dict(zip(TABLE10_COLUMNS, row)) for key, row in _TABLE10_ROWS.items()}
+
+# REFERENCE Part 4: real 3x3 centre-zone histograms as read off the release's
+# three figures that plot them (+-20 %; objects and locations not stated,
+# 8 in objects by their look). Per figure, what it lets one read: floor and
+# bump as fractions of the direct peak, the bump's excess over the pre-peak
+# floor, the late bins over that floor, the bump's FWHM in bins, and counts
+# where the figure has a counts axis.
+REAL_CENTRE_ZONE = {
+    "capture_setup.png": {"floor_fraction": 0.05, "bump_fraction": 0.07, "bump_over_floor": 1.5, "late_over_floor": 0.5, "bump_fwhm": 6.0},
+    "teaser.png": {"floor_before": 225.0, "bump_excess": 500.0, "bump_over_floor": 2.2, "late_over_floor": 0.25, "bump_fwhm": 4.5},
+    "digital_twin.png": {"floor_fraction": 0.02, "bump_fraction": 0.04},
+}
