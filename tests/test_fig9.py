@@ -1,5 +1,6 @@
 """Fig 9 on tiny synthetic pairs: table shape, a real test split disjoint from
-the real training samples, determinism per seed."""
+the real training samples, determinism per seed, predictions bounded to the
+training labels' box."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import pandas as pd
 import pytest
 
 from denali_pipe import geometry as geo
-from denali_pipe.fig9 import real_samples, run_fig9
+from denali_pipe.fig9 import bound_to_workspace, real_samples, run_fig9
 from denali_pipe.report.fig9 import write_fig9
 from denali_pipe.train import Hyper
 from denali_pipe.transforms import FIDELITIES, KERNEL_BINS, Pairs, Transforms, split_pairs
@@ -71,3 +72,24 @@ def test_deterministic_per_seed(data, runs):
     pd.testing.assert_frame_equal(again, expected)
     other = runs[(runs["seed"] == 1) & (runs["n_real"] == 5)].reset_index(drop=True)
     assert not np.allclose(other["rmse"], expected["rmse"])
+
+
+def test_bound_to_workspace_clips_onto_the_box_edge():
+    lo, hi = np.array([-0.2, 0.1]), np.array([0.3, 0.5])
+    pred = np.array([[0.0, 0.3], [1e6, 0.3], [-1e6, -1e6], [0.3, 0.1]])
+    bounded = bound_to_workspace(pred, lo, hi)
+    assert np.array_equal(bounded[0], pred[0]) and np.array_equal(bounded[3], pred[3])  # inside or on the edge: untouched
+    assert np.array_equal(bounded[1], [0.3, 0.3]) and np.array_equal(bounded[2], [-0.2, 0.1])
+
+
+def test_run_fig9_bounds_every_model_to_its_training_labels_box(data, monkeypatch):
+    """A model that answers far outside the workspace scores as if it had
+    answered the box's corner: the training captures' positions (twins and
+    real repeats alike) bound every model."""
+    pairs, xy = data
+    monkeypatch.setattr("denali_pipe.fig9.predict", lambda model, stats, x, norm: np.full((len(x), 2), 1e6))
+    one_seed = {**SETTINGS, "fig9": {**SETTINGS["fig9"], "seeds": [1]}}
+    runs = run_fig9(pairs, xy, TRANSFORMS, one_seed, HP, split_seed=42)
+    split = split_pairs(pairs.keys, 42, SETTINGS["test_fraction"])
+    miss = np.repeat(xy[split.test], R, axis=0).astype(np.float64) - xy[split.train].max(axis=0)
+    assert np.allclose(runs["rmse"], np.sqrt(np.mean(miss**2)))
