@@ -17,6 +17,13 @@ starts from the same weights, so the curves differ by their data alone.
 Every model's predictions are bounded to the workspace, the box of its
 training labels (`bound_to_workspace`), so that the raw twins' wild
 extrapolation on real counts stays on the scale of the other errors.
+
+Beside the models, the table holds the predict-the-mean baseline as rows of
+their own (fidelity `MEAN_BASELINE`, one per seed, n_real = n_sim = 0: it
+sees no histogram, only the training captures' positions): the same metrics
+of predicting the mean training position for every real test sample. The
+split is `split_seed`'s, so its rows are equal across seeds; they are kept
+per seed so that the baseline aggregates like every model.
 """
 
 from __future__ import annotations
@@ -29,7 +36,7 @@ import pandas as pd
 import torch
 from torch import nn
 
-from denali_pipe.metrics import regression_metrics
+from denali_pipe.metrics import predict_mean_baseline, regression_metrics
 from denali_pipe.models import build_model
 from denali_pipe.preprocess import normalise
 from denali_pipe.seeds import derive_seed, rng_for
@@ -37,6 +44,8 @@ from denali_pipe.train import EVAL_BATCH, Hyper
 from denali_pipe.transforms import FIDELITIES, Pairs, Transforms, apply, split_pairs
 
 log = logging.getLogger(__name__)
+
+MEAN_BASELINE = "mean_baseline"  # the `fidelity` of the predict-the-mean baseline's rows
 
 
 def sim_samples(pairs: Pairs, y: np.ndarray, t: Transforms, fidelity: str, copies: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -123,8 +132,8 @@ def run_fig9(pairs: Pairs, labels: np.ndarray, t: Transforms, settings: dict, hp
     the real train/test split (the transforms' split).
 
     Returns one row per model, predictions bounded to its training labels'
-    box: fidelity, n_real, seed, n_sim, n_test, then
-    `metrics.regression_metrics` on the real test samples (m, m^2)."""
+    box, and one `MEAN_BASELINE` row per seed: fidelity, n_real, seed, n_sim,
+    n_test, then `metrics.regression_metrics` on the real test samples (m, m^2)."""
     if len(labels) != len(pairs.real):
         raise ValueError(f"fig9: {len(labels)} labels for {len(pairs.real)} pairs")
     f9 = settings["fig9"]
@@ -133,6 +142,8 @@ def run_fig9(pairs: Pairs, labels: np.ndarray, t: Transforms, settings: dict, hp
     y_train, y_test = labels[split.train], labels[split.test]
     x_test = test.real.reshape(-1, test.bins)
     y_test = np.repeat(y_test, test.real.shape[1], axis=0)
+    baseline = regression_metrics(predict_mean_baseline(y_train, len(y_test)), y_test)
+    log.info("fig9 predict-the-mean baseline: test RMSE %.4f m", baseline["rmse"])
     rows = []
     for seed in f9["seeds"]:
         for fidelity in FIDELITIES:
@@ -145,4 +156,5 @@ def run_fig9(pairs: Pairs, labels: np.ndarray, t: Transforms, settings: dict, hp
                 m = regression_metrics(bound_to_workspace(predict(model, stats, x_test, hp.norm), *workspace(y_fit)), y_test)
                 log.info("fig9 seed %d %s + %d real: test RMSE %.4f m (%.1f s)", seed, fidelity, n_real, m["rmse"], time.perf_counter() - t0)
                 rows.append({"fidelity": fidelity, "n_real": n_real, "seed": seed, "n_sim": len(x_sim), "n_test": len(x_test), **m})
+        rows.append({"fidelity": MEAN_BASELINE, "n_real": 0, "seed": seed, "n_sim": 0, "n_test": len(x_test), **baseline})
     return pd.DataFrame(rows)
