@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from denali_pipe.capture_sets import expected_sets
+from denali_pipe.fig9 import MEAN_BASELINE
 from denali_pipe.geometry import select_locations
 from denali_pipe.io.store import open_set
 from denali_pipe.objects import load_catalogue
@@ -283,7 +284,7 @@ def test_transforms_and_fig9(tiny_run):
     assert t["a"] > 0 and t["a_noise"] >= 1 and t["b_noise"] >= 0
     assert len(t["kernel"]) == t["kernel_bins"] == 11 and abs(sum(t["kernel"]) - 1) < 1e-6
     fig9 = pd.read_csv(tiny_run / "results/fig9.csv")
-    assert set(fig9["fidelity"]) == set(FIDELITIES) and len(FIDELITIES) == 4
+    assert set(fig9["fidelity"]) == {*FIDELITIES, MEAN_BASELINE} and len(FIDELITIES) == 4
     assert (tiny_run / "results/fig9.png").stat().st_size > 10_000
 
 

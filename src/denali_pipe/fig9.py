@@ -13,6 +13,17 @@ Per seed: the model's initialisation and batch order, the draw of real
 samples (one permutation of the training captures' repeats, its first n, so
 the sets are nested as n grows) and the noise draws. Every model of one seed
 starts from the same weights, so the curves differ by their data alone.
+
+Every model's predictions are bounded to the workspace, the box of its
+training labels (`bound_to_workspace`), so that the raw twins' wild
+extrapolation on real counts stays on the scale of the other errors.
+
+Beside the models, the table holds the predict-the-mean baseline as rows of
+their own (fidelity `MEAN_BASELINE`, one per seed, n_real = n_sim = 0: it
+sees no histogram, only the training captures' positions): the same metrics
+of predicting the mean training position for every real test sample. The
+split is `split_seed`'s, so its rows are equal across seeds; they are kept
+per seed so that the baseline aggregates like every model.
 """
 
 from __future__ import annotations
@@ -25,7 +36,7 @@ import pandas as pd
 import torch
 from torch import nn
 
-from denali_pipe.metrics import regression_metrics
+from denali_pipe.metrics import predict_mean_baseline, regression_metrics
 from denali_pipe.models import build_model
 from denali_pipe.preprocess import normalise
 from denali_pipe.seeds import derive_seed, rng_for
@@ -33,6 +44,8 @@ from denali_pipe.train import EVAL_BATCH, Hyper
 from denali_pipe.transforms import FIDELITIES, Pairs, Transforms, apply, split_pairs
 
 log = logging.getLogger(__name__)
+
+MEAN_BASELINE = "mean_baseline"  # the `fidelity` of the predict-the-mean baseline's rows
 
 
 def sim_samples(pairs: Pairs, y: np.ndarray, t: Transforms, fidelity: str, copies: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -92,6 +105,23 @@ def predict(model: nn.Module, stats: tuple | None, x: np.ndarray, norm: str) -> 
         return torch.cat([model(xn[i : i + EVAL_BATCH]) for i in range(0, len(xn), EVAL_BATCH)]).numpy()
 
 
+def bound_to_workspace(pred: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(N, 2) predicted positions (m) clipped to the box lo..hi, (2,) corners in m.
+
+    The gantry only places objects inside its workspace, so an answer outside
+    it is wrong by construction; a model that extrapolates on unfamiliar
+    inputs (raw twins in radiance units, tested on real counts) would
+    otherwise miss by ~1e6 m and dwarf every other error. Pass the box of the
+    model's training labels (`workspace`): data rather than our design
+    drawing, so it also holds on the real release."""
+    return np.clip(pred, lo, hi)
+
+
+def workspace(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The axis-aligned box of positions y (N, 2) m: its (2,) lower and upper corners."""
+    return y.min(axis=0), y.max(axis=0)
+
+
 def run_fig9(pairs: Pairs, labels: np.ndarray, t: Transforms, settings: dict, hp: Hyper, split_seed: int) -> pd.DataFrame:
     """Every (fidelity, n real, seed) model of Fig 9 and its test metrics.
 
@@ -101,8 +131,9 @@ def run_fig9(pairs: Pairs, labels: np.ndarray, t: Transforms, settings: dict, hp
     hp: Adam/batch/normalisation settings and epochs; split_seed: the seed of
     the real train/test split (the transforms' split).
 
-    Returns one row per model: fidelity, n_real, seed, n_sim, n_test, then
-    `metrics.regression_metrics` on the real test samples (m, m^2)."""
+    Returns one row per model, predictions bounded to its training labels'
+    box, and one `MEAN_BASELINE` row per seed: fidelity, n_real, seed, n_sim,
+    n_test, then `metrics.regression_metrics` on the real test samples (m, m^2)."""
     if len(labels) != len(pairs.real):
         raise ValueError(f"fig9: {len(labels)} labels for {len(pairs.real)} pairs")
     f9 = settings["fig9"]
@@ -111,15 +142,19 @@ def run_fig9(pairs: Pairs, labels: np.ndarray, t: Transforms, settings: dict, hp
     y_train, y_test = labels[split.train], labels[split.test]
     x_test = test.real.reshape(-1, test.bins)
     y_test = np.repeat(y_test, test.real.shape[1], axis=0)
+    baseline = regression_metrics(predict_mean_baseline(y_train, len(y_test)), y_test)
+    log.info("fig9 predict-the-mean baseline: test RMSE %.4f m", baseline["rmse"])
     rows = []
     for seed in f9["seeds"]:
         for fidelity in FIDELITIES:
             x_sim, y_sim = sim_samples(train, y_train, t, fidelity, f9["sim_copies"], seed)
             for n_real in f9["real_samples"]:
                 x_real, y_real, _ = real_samples(train, y_train, n_real, seed)
+                y_fit = np.concatenate([y_sim, y_real])
                 t0 = time.perf_counter()
-                model, stats = train_localiser(np.concatenate([x_sim, x_real]), np.concatenate([y_sim, y_real]), hp, derive_seed(seed, "fig9", "model") % 2**31)
-                m = regression_metrics(predict(model, stats, x_test, hp.norm), y_test)
+                model, stats = train_localiser(np.concatenate([x_sim, x_real]), y_fit, hp, derive_seed(seed, "fig9", "model") % 2**31)
+                m = regression_metrics(bound_to_workspace(predict(model, stats, x_test, hp.norm), *workspace(y_fit)), y_test)
                 log.info("fig9 seed %d %s + %d real: test RMSE %.4f m (%.1f s)", seed, fidelity, n_real, m["rmse"], time.perf_counter() - t0)
                 rows.append({"fidelity": fidelity, "n_real": n_real, "seed": seed, "n_sim": len(x_sim), "n_test": len(x_test), **m})
+        rows.append({"fidelity": MEAN_BASELINE, "n_real": 0, "seed": seed, "n_sim": 0, "n_test": len(x_test), **baseline})
     return pd.DataFrame(rows)
