@@ -7,7 +7,8 @@ STAMP := $(VENV)/.installed
 DEBS  := libllvm19
 CORES ?= all
 
-# Rules call the `denali` console script, so the venv must come first on PATH.
+# snakemake and pytest come from the venv (the rules themselves run the
+# project through the interpreter that runs snakemake).
 export PATH := $(abspath $(BIN)):$(PATH)
 
 .PHONY: run test setup debs

@@ -1,6 +1,7 @@
 # Config loading and validation, capture-set discovery, input functions.
 import json
 import shlex
+import sys
 
 from snakemake.utils import min_version, validate
 
@@ -17,6 +18,11 @@ configfile: "config/config.yaml"
 
 
 validate(config, "../config/schema.yaml")
+
+# The rules run `denali <verb>` through the interpreter that runs this
+# workflow, so jobs find the project whether or not its venv is activated,
+# locally or on cluster nodes that share the venv's path.
+DENALI = f"{shlex.quote(sys.executable)} -m denali_pipe.cli"
 
 CATALOGUE = load_catalogue(config["objects_sheet"])
 RAW = config["raw_dir"]

@@ -13,10 +13,8 @@ rule transforms:
         "logs/fit/transforms.log",
     benchmark:
         "benchmarks/fit/transforms.tsv"
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali fit-transforms --features {input.features} --twins {input.twins} --config {params.config:q} --out {output} > {log} 2>&1"
+        "{DENALI} fit-transforms --features {input.features} --twins {input.twins} --config {params.config:q} --out {output} > {log} 2>&1"
 
 
 rule fig9:
@@ -36,8 +34,6 @@ rule fig9:
         "logs/fit/fig9.log",
     benchmark:
         "benchmarks/fit/fig9.tsv"
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali fig9 --features {input.features} --twins {input.twins} --positions {input.positions} --transforms {input.transforms}"
+        "{DENALI} fig9 --features {input.features} --twins {input.twins} --positions {input.positions} --transforms {input.transforms}"
         " --config {params.config:q} --hyper {params.hyper:q} --threads {threads} --out {output.png} > {log} 2>&1"

@@ -14,10 +14,8 @@ rule ingest:
         "logs/ingest/{set}.log",
     benchmark:
         "benchmarks/ingest/{set}.tsv"
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali ingest {input} {params.object} --store {output.store} --index {output.index} > {log} 2>&1"
+        "{DENALI} ingest {input} {params.object} --store {output.store} --index {output.index} > {log} 2>&1"
 
 
 rule index:
@@ -27,10 +25,8 @@ rule index:
         "results/index/captures.parquet",
     log:
         "logs/index.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali index {input} --out {output} > {log} 2>&1"
+        "{DENALI} index {input} --out {output} > {log} 2>&1"
 
 
 rule table4:
@@ -40,7 +36,5 @@ rule table4:
         report("results/table4.csv", caption="../report/table4.rst", category="1. Captures"),
     log:
         "logs/table4.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali table4 {input} --out {output} > {log} 2>&1"
+        "{DENALI} table4 {input} --out {output} > {log} 2>&1"

@@ -13,10 +13,8 @@ rule poses:
         "logs/poses/{set}.log",
     benchmark:
         "benchmarks/poses/{set}.tsv"
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali poses {input} --out {output} > {log} 2>&1"
+        "{DENALI} poses {input} --out {output} > {log} 2>&1"
 
 
 # Calibrated from the background sets only, which every configuration has and
@@ -31,10 +29,8 @@ rule calibrate:
         scene="results/calibration/scene.json",
     log:
         "logs/calibrate.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali calibrate {input} --outdir results/calibration > {log} 2>&1"
+        "{DENALI} calibrate {input} --outdir results/calibration > {log} 2>&1"
 
 
 rule table6:
@@ -47,10 +43,8 @@ rule table6:
         fig12_data="results/fig12.csv",
     log:
         "logs/table6.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali table6 {input.poses} --figure-store {input.figure_store} --table6 {output.table6} --fig12 {output.fig12} > {log} 2>&1"
+        "{DENALI} table6 {input.poses} --figure-store {input.figure_store} --table6 {output.table6} --fig12 {output.fig12} > {log} 2>&1"
 
 
 rule detections:
@@ -60,7 +54,5 @@ rule detections:
         report("results/calibration/detections.csv", caption="../report/detections.rst", category="2. Tracking poses"),
     log:
         "logs/detections.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali detections {input} --out {output} > {log} 2>&1"
+        "{DENALI} detections {input} --out {output} > {log} 2>&1"

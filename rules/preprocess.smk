@@ -10,10 +10,8 @@ rule crop_window:
         "results/features/crop_{res}.json",
     log:
         "logs/features/crop_{res}.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali crop-window {input} --out {output} > {log} 2>&1"
+        "{DENALI} crop-window {input} --out {output} > {log} 2>&1"
 
 
 rule preprocess:
@@ -27,10 +25,8 @@ rule preprocess:
         "logs/features/{set}.log",
     benchmark:
         "benchmarks/preprocess/{set}.tsv"
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali preprocess {input.store} --background {input.background} --crop {input.crop} --out {output} > {log} 2>&1"
+        "{DENALI} preprocess {input.store} --background {input.background} --crop {input.crop} --out {output} > {log} 2>&1"
 
 
 rule dataset:
@@ -43,8 +39,6 @@ rule dataset:
         table="results/datasets/{res}.parquet",
     log:
         "logs/datasets/{res}.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali dataset {input.features} --positions {input.positions} --objects-sheet {input.sheet}"
+        "{DENALI} dataset {input.features} --positions {input.positions} --objects-sheet {input.sheet}"
         " --out {output.x} --table {output.table} > {log} 2>&1"

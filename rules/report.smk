@@ -9,10 +9,8 @@ rule table5:
         report("results/table5.csv", caption="../report/table5.rst", category="3. Training"),
     log:
         "logs/report/table5.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali report table5 {input} --out {output} > {log} 2>&1"
+        "{DENALI} report table5 {input} --out {output} > {log} 2>&1"
 
 
 rule table2:
@@ -22,10 +20,8 @@ rule table2:
         report("results/table2.csv", caption="../report/table2.rst", category="3. Training"),
     log:
         "logs/report/table2.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali report table2 {input} --out {output} > {log} 2>&1"
+        "{DENALI} report table2 {input} --out {output} > {log} 2>&1"
 
 
 rule table10:
@@ -35,10 +31,8 @@ rule table10:
         report("results/table10.csv", caption="../report/table10.rst", category="3. Training"),
     log:
         "logs/report/table10.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali report table10 {input} --out {output} > {log} 2>&1"
+        "{DENALI} report table10 {input} --out {output} > {log} 2>&1"
 
 
 rule speed_vs_accuracy:
@@ -49,10 +43,8 @@ rule speed_vs_accuracy:
         csv="results/speed_vs_accuracy.csv",
     log:
         "logs/report/speed_vs_accuracy.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali report speed-accuracy {input} --out {output.png} > {log} 2>&1"
+        "{DENALI} report speed-accuracy {input} --out {output.png} > {log} 2>&1"
 
 
 rule training_curves:
@@ -67,7 +59,5 @@ rule training_curves:
         fig="fig16|fig17",
     log:
         "logs/report/{fig}.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali report {wildcards.fig} {input} --title {params.title} --out {output.png} > {log} 2>&1"
+        "{DENALI} report {wildcards.fig} {input} --title {params.title} --out {output.png} > {log} 2>&1"

@@ -20,10 +20,8 @@ if config["source"] == "synthetic":
             "logs/rig/{object}_{size}.log",
         benchmark:
             "benchmarks/rig/{object}_{size}.tsv"
-        conda:
-            "../envs/denali.yaml"
         shell:
-            "denali synth {output} {params.object} --config {params.config:q} > {log} 2>&1"
+            "{DENALI} synth {output} {params.object} --config {params.config:q} > {log} 2>&1"
 
 
 rule rig_examples:
@@ -35,10 +33,8 @@ rule rig_examples:
         csv="results/rig_examples.csv",
     log:
         "logs/rig_examples.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali rig-examples --sets {input.sets} --backgrounds {input.backgrounds} --out {output.png} > {log} 2>&1"
+        "{DENALI} rig-examples --sets {input.sets} --backgrounds {input.backgrounds} --out {output.png} > {log} 2>&1"
 
 
 rule rig_vs_real:
@@ -50,7 +46,5 @@ rule rig_vs_real:
         csv="results/rig_vs_real.csv",
     log:
         "logs/rig_vs_real.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali rig-vs-real --sets {input.sets} --backgrounds {input.backgrounds} --png {output.png} --csv {output.csv} > {log} 2>&1"
+        "{DENALI} rig-vs-real --sets {input.sets} --backgrounds {input.backgrounds} --png {output.png} --csv {output.csv} > {log} 2>&1"

@@ -24,8 +24,6 @@ rule train:
         f"logs/{RUN_DIR}.log",
     benchmark:
         f"benchmarks/{RUN_DIR}.tsv"
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali train {input.x} --table {input.table} --cell {params.cell} --hyper {params.hyper}"
+        "{DENALI} train {input.x} --table {input.table} --cell {params.cell} --hyper {params.hyper}"
         " --validation-fraction {params.validation} {params.budget} --threads {threads} --outdir {params.outdir} > {log} 2>&1"

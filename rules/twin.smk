@@ -34,10 +34,8 @@ rule twin:
         "logs/twin/{object}_{size}.log",
     benchmark:
         "benchmarks/twin/{object}_{size}.tsv"
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali render {input.scene} {params.object} --size {wildcards.size} --config {params.config:q} --out {output} > {log} 2>&1"
+        "{DENALI} render {input.scene} {params.object} --size {wildcards.size} --config {params.config:q} --out {output} > {log} 2>&1"
 
 
 rule render_benchmark:
@@ -54,10 +52,8 @@ rule render_benchmark:
         "logs/render_benchmark.log",
     benchmark:
         "benchmarks/render_benchmark.tsv"
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali render-benchmark {input.scene} --objects {params.objects:q} --config {params.config:q} --out {output.png} > {log} 2>&1"
+        "{DENALI} render-benchmark {input.scene} --objects {params.objects:q} --config {params.config:q} --out {output.png} > {log} 2>&1"
 
 
 rule fig18:
@@ -74,8 +70,6 @@ rule fig18:
         config=json.dumps({"seed": config["seed"], "variant": TWIN["mitransient"]["variant"], "fig18": TWIN["fig18"]}, sort_keys=True),
     log:
         "logs/fig18.log",
-    conda:
-        "../envs/denali.yaml"
     shell:
-        "denali fig18 {input.scene} --sets {input.sets} --backgrounds {input.backgrounds} --twins {input.twins}"
+        "{DENALI} fig18 {input.scene} --sets {input.sets} --backgrounds {input.backgrounds} --twins {input.twins}"
         " --crop {input.crop} --config {params.config:q} --out {output.png} > {log} 2>&1"

@@ -26,8 +26,11 @@ def copy_workflow(dest: Path) -> Path:
 
 
 def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
-    """Run snakemake in `workdir` with the venv's `denali` on PATH."""
-    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
+    """Run the venv's snakemake in `workdir` by its path, the venv left OFF
+    PATH (as for a user who never activated it): the rules must reach the
+    project through the interpreter that runs the workflow."""
+    venv_bin = str(Path(sys.executable).parent)
+    env = {**os.environ, "PATH": os.pathsep.join(p for p in os.environ["PATH"].split(os.pathsep) if p != venv_bin)}
     proc = subprocess.run(
         [str(Path(sys.executable).parent / "snakemake"), *args],
         cwd=workdir, env=env, capture_output=True, text=True,
