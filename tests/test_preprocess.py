@@ -63,15 +63,18 @@ def test_subtraction_shape_mismatch_is_an_error():
         pp.subtract_background(_set(L=4), _set(L=3))
 
 
-def test_crop_window_is_after_every_zones_direct_return():
+def test_crop_window_starts_each_zone_after_its_direct_return():
     bgs = [_set(L=10, seed=s) for s in (1, 2)]
-    start = pp.crop_window(bgs)
-    # latest zone peaks at 45 + 2*8 = 61; tail 2.5 bins down to 10 % of the floor
-    # (130 of 6000 counts): ln(6000/130) * 2.5 ~ 9.6 bins after the peak
-    assert 61 + 8 <= start <= 61 + 12
+    w = pp.crop_window(bgs)
+    # zone z peaks at 45 + 2 z; its tail (2.5 bins) falls to the floor (6000 -> 1300
+    # counts of excess) ln(6000 / 1300) * 2.5 ~ 3.8 bins after the peak
+    peaks = 45 + 2 * np.arange(9)
+    assert np.all((w.zone_starts.ravel() >= peaks + 3) & (w.zone_starts.ravel() <= peaks + 6))
+    assert w.crop_start == w.zone_starts.min()
     profile = np.mean([b.mean(axis=(0, 1)) for b in bgs], axis=0).reshape(9, -1)
     floor = profile[:, :16].mean(axis=1)
-    assert np.all(profile[:, start:].max(axis=1) - floor < 0.2 * floor)
+    for z, start in enumerate(w.zone_starts.ravel()):
+        assert profile[z, start:].max() - floor[z] <= 1.1 * floor[z]
 
 
 def test_crop_window_ignores_zones_without_a_significant_return():
@@ -79,17 +82,30 @@ def test_crop_window_ignores_zones_without_a_significant_return():
     bg[:, :, 2, 2] = np.random.default_rng(3).poisson(0.5, bg[:, :, 2, 2].shape)  # a zone of shot noise only
     ends = pp.direct_end(bg.mean(axis=(0, 1)).reshape(9, -1), n_averaged=30)
     assert ends[8] == -1 and (ends[:8] > 0).all()
-    assert pp.crop_window([bg]) == ends.max()
+    w = pp.crop_window([bg])
+    assert w.crop_start == ends[:8].min() and w.zone_starts[2, 2] == w.crop_start
 
 
-def test_preprocess_matches_locations_and_crops():
+def test_crop_window_round_trips_through_json():
+    w = pp.crop_window([_set(L=4, seed=1)])
+    back = pp.CropWindow.from_dict(w.to_dict())
+    assert back.crop_start == w.crop_start and np.array_equal(back.zone_starts, w.zone_starts)
+
+
+def test_preprocess_matches_locations_crops_and_masks_late_zones():
     bg = _set(L=4, seed=1)
     h = _set(L=3, bump=150.0, seed=2)
-    f = pp.preprocess(h, np.array([7, 3, 9]), bg, np.array([3, 5, 7, 9]), crop_start=80)
+    starts = np.full((3, 3), 80)
+    starts[2, 2] = 85
+    window = pp.CropWindow(80, starts)
+    f = pp.preprocess(h, np.array([7, 3, 9]), bg, np.array([3, 5, 7, 9]), window)
     assert f.values.shape == (3, 3, 3, 3, 48)
     assert f.values[..., 1, 1, 10:15].mean() == pytest.approx(150, abs=25)
+    assert np.all(f.values[..., 2, 2, :5] == 0) and np.any(f.values[..., 2, 2, 5:] != 0)
     with pytest.raises(ValueError, match="no capture at locations \\[8\\]"):
-        pp.preprocess(h, np.array([7, 3, 8]), bg, np.array([3, 5, 7, 9]), crop_start=80)
+        pp.preprocess(h, np.array([7, 3, 8]), bg, np.array([3, 5, 7, 9]), window)
+    with pytest.raises(ValueError, match="zones"):
+        pp.preprocess(h, np.array([7, 3, 9]), bg, np.array([3, 5, 7, 9]), pp.CropWindow(80, np.full((8, 8), 80)))
 
 
 def test_normalise_log_z_uses_given_statistics():

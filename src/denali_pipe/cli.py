@@ -160,11 +160,11 @@ def cmd_crop_window(args: argparse.Namespace) -> None:
     from denali_pipe.preprocess import DIRECT_END_FRACTION, crop_window
 
     stores = [open_set(Path(p)) for p in args.backgrounds]
-    start = crop_window([s.histograms[...] for s in stores])
-    record = {"crop_start": start, "direct_end_fraction": DIRECT_END_FRACTION, "backgrounds": [s.name for s in stores]}
+    window = crop_window([s.histograms[...] for s in stores])
+    record = {**window.to_dict(), "direct_end_fraction": DIRECT_END_FRACTION, "backgrounds": [s.name for s in stores]}
     with atomic_file(Path(args.out)) as tmp:
         tmp.write_text(json.dumps(record, indent=1) + "\n")
-    log.info("wrote %s: first kept bin %d", args.out, start)
+    log.info("wrote %s: first kept bin %d, per zone %s", args.out, window.crop_start, window.zone_starts.tolist())
 
 
 def cmd_preprocess(args: argparse.Namespace) -> None:
@@ -172,16 +172,16 @@ def cmd_preprocess(args: argparse.Namespace) -> None:
 
     from denali_pipe.io.features import write_features
     from denali_pipe.io.store import open_set
-    from denali_pipe.preprocess import preprocess
+    from denali_pipe.preprocess import CropWindow, preprocess
 
     store, bg = open_set(Path(args.store)), open_set(Path(args.background))
-    crop = json.loads(Path(args.crop).read_text())["crop_start"]
+    window = CropWindow.from_dict(json.loads(Path(args.crop).read_text()))
     try:
-        feats = preprocess(store.histograms[...], store.locations, bg.histograms[...], bg.locations, crop)
+        feats = preprocess(store.histograms[...], store.locations, bg.histograms[...], bg.locations, window)
     except ValueError as e:
         raise ValueError(f"{args.store} (background {args.background}): {e}") from None
     write_features(Path(args.out), store.capture_set, feats, bg.name)
-    log.info("wrote %s: %s from bin %d, shifts %s", args.out, feats.values.shape, crop, sorted(set(feats.shifts.ravel().tolist())))
+    log.info("wrote %s: %s from bin %d, shifts %s", args.out, feats.values.shape, window.crop_start, sorted(set(feats.shifts.ravel().tolist())))
 
 
 def cmd_dataset(args: argparse.Namespace) -> None:

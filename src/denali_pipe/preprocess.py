@@ -11,11 +11,16 @@ each repeat stays a sample (as in the paper). Steps, per capture set:
 2. Background subtraction: minus the mean over repeats of the `NOOBJECT` set
    captured at the same location, resolution and lighting. What remains is
    the object's three-bounce return plus noise (negative values kept).
-3. Cropping: bins before `crop_start` hold the direct return (and its pulse
-   tail), which subtraction leaves as noise `sqrt(2 * counts)` thousands of
-   counts tall; they are dropped. `crop_start` is derived from the background
-   sets of one resolution (`crop_window`), so every set of that resolution,
-   both lightings, shares one window.
+3. Cropping: after subtraction each zone's direct return leaves its shot
+   noise, sqrt(2 * counts) thousands of counts tall at the peak. Every zone
+   keeps its bins from its own direct-return end (`CropWindow.zone_starts`):
+   the set drops the bins before the earliest end (`crop_start`) and sets a
+   later-ending zone's bins before its own end to zero. Zones see their wall
+   patches at different distances (peaks 16 bins apart on 3x3), and one
+   window for all would either cut the object's return out of the early
+   zones or keep the late zones' tails. The window is derived from the
+   background sets of one resolution (`crop_window`), so every set of that
+   resolution, both lightings, shares it.
 
 Normalisation (raw counts, or log1p + z-score) needs statistics over a
 training split, so it lives with training (`normalise`), not here.
@@ -28,11 +33,13 @@ from dataclasses import dataclass
 import numpy as np
 
 # After subtraction the direct return cancels in expectation and leaves its
-# shot noise, whose variance is its counts. It has ended where its excess over
-# the flat floor adds less than this fraction to the floor's counts, i.e. the
-# noise there is within 5 % of the floor's (3x3 demo: 10 % of ~1,300 counts,
-# reached ~14 bins after a ~6,000-count peak).
-DIRECT_END_FRACTION = 0.1
+# shot noise, whose variance is its counts. A zone's return has ended where
+# its excess over the floor is at most the floor itself, i.e. the noise there
+# is within sqrt(2) of the floor's. The slow tail of the real pulse decays
+# over tens of bins and the three-bounce bump sits on it (REFERENCE Part 4),
+# so a stricter end would crop the bump away (3x3 demo: 10 % of the floor is
+# reached ~45 bins after the peak, in the middle of the bumps).
+DIRECT_END_FRACTION = 1.0
 # Bins before the direct return used to estimate the flat floor.
 FLOOR_BINS = 16
 # A zone's direct return counts only if its mean peak stands this many noise sigmas above the floor.
@@ -114,15 +121,34 @@ def direct_end(profile: np.ndarray, n_averaged: int, fraction: float = DIRECT_EN
     return np.array(ends)
 
 
-def crop_window(backgrounds: list[np.ndarray], fraction: float = DIRECT_END_FRACTION) -> int:
-    """The first bin kept: the latest direct-return end over every significant
-    zone of the given background sets (each (L, R, n, n, B), one resolution)."""
+@dataclass(frozen=True)
+class CropWindow:
+    """crop_start: the first bin kept; zone_starts (n, n) int: each zone's
+    first bin with data (>= crop_start; crop_start for zones without a
+    significant direct return)."""
+
+    crop_start: int
+    zone_starts: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {"crop_start": self.crop_start, "zone_starts": self.zone_starts.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "CropWindow":
+        return cls(int(d["crop_start"]), np.asarray(d["zone_starts"], dtype=int))
+
+
+def crop_window(backgrounds: list[np.ndarray], fraction: float = DIRECT_END_FRACTION) -> CropWindow:
+    """Each zone's direct-return end, the latest over the given background
+    sets (each (L, R, n, n, B), one resolution), and the earliest of those."""
     if not backgrounds:
         raise ValueError("crop_window needs at least one background set")
-    ends = np.concatenate([direct_end(b.mean(axis=(0, 1), dtype=np.float64).reshape(-1, b.shape[-1]), b.shape[0] * b.shape[1], fraction) for b in backgrounds])
+    n = backgrounds[0].shape[2]
+    ends = np.stack([direct_end(b.mean(axis=(0, 1), dtype=np.float64).reshape(-1, b.shape[-1]), b.shape[0] * b.shape[1], fraction) for b in backgrounds]).max(axis=0)
     if (ends < 0).all():
         raise ValueError("no zone of the background sets shows a significant direct return")
-    return int(ends.max())
+    start = int(ends[ends >= 0].min())
+    return CropWindow(start, np.maximum(ends, start).reshape(n, n))
 
 
 @dataclass(frozen=True)
@@ -139,8 +165,9 @@ class Features:
     crop_start: int
 
 
-def preprocess(hist: np.ndarray, locations: np.ndarray, background: np.ndarray, background_locations: np.ndarray, crop_start: int) -> Features:
-    """Align, subtract the background at matching locations, crop.
+def preprocess(hist: np.ndarray, locations: np.ndarray, background: np.ndarray, background_locations: np.ndarray, window: CropWindow) -> Features:
+    """Align, subtract the background at matching locations, crop to `window`
+    (zeroing each zone's bins before its own start).
 
     hist (L, R, n, n, B) and background (Lb, Rb, n, n, B) counts; the
     background must cover every location of `locations`."""
@@ -149,11 +176,16 @@ def preprocess(hist: np.ndarray, locations: np.ndarray, background: np.ndarray, 
     if missing:
         raise ValueError(f"the background set has no capture at locations {missing}")
     bg = background[[pos[int(k)] for k in locations]]
+    crop_start = window.crop_start
     if not 0 <= crop_start < hist.shape[-1]:
         raise ValueError(f"crop_start {crop_start} is outside 0..{hist.shape[-1] - 1}")
+    if window.zone_starts.shape != hist.shape[2:4]:
+        raise ValueError(f"crop window of {window.zone_starts.shape} zones for histograms of {hist.shape[2:4]} zones")
     shifts = alignment_shifts(hist, bg)
     values = subtract_background(shift_bins(hist, shifts), bg)[..., crop_start:]
-    return Features(np.ascontiguousarray(values), np.asarray(locations), shifts, crop_start)
+    kept = np.arange(crop_start, hist.shape[-1]) >= window.zone_starts[..., None]  # (n, n, T)
+    values = np.where(kept, values, np.float32(0.0))
+    return Features(np.ascontiguousarray(values, dtype=np.float32), np.asarray(locations), shifts, crop_start)
 
 
 def normalise(x: np.ndarray, kind: str, stats: tuple[float, float] | None = None) -> tuple[np.ndarray, tuple[float, float] | None]:
