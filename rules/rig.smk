@@ -6,7 +6,9 @@ if config["source"] == "synthetic":
 
     rule rig:
         input:
-            rig_mesh_files,
+            meshes=rig_mesh_files,
+            # the release poses.json the tracked scene follows (rig.scene_poses), so that its edits rerun the rig
+            scene_poses=[config["rig"]["scene_poses"]] if config["rig"]["scene_poses"] else [],
         output:
             [
                 directory(raw_set(f"{{object}}_{{size}}_{res}_{light}"))

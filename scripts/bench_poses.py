@@ -2,7 +2,8 @@
 """Benchmark the tracking-pose stage; prints figures, asserts nothing.
 
     python scripts/bench_poses.py                       # 20 locations, scales 1.0 0.5 0.35
-    python scripts/bench_poses.py --locations 50 --scales 0.5
+    python scripts/bench_poses.py --locations 25 --sets 4 --scales 0.5   # the demo's calibration
+    python scripts/bench_poses.py --poses-json PATH     # the release scene from another poses.json
 
 The rig renders tracking frames (lights on, plus a few lights off) at each
 frame scale (1.0 = 1280x720); then:
@@ -12,13 +13,18 @@ frame scale (1.0 = 1280x720); then:
   square inside the image, not covered by a nearer tag), centre error
   against the projected truth, radial corner bias (negative: square too
   small), false positives, time per frame on one thread;
-- throughput: frames per second of detection + refinement + every PnP
+- throughput: frames per second of detection + refinement
   (`estimate.observe_frame`), pinned to one core and to two
-  (os.sched_setaffinity + cv2.setNumThreads + the AprilTag threads);
-- accuracy of the whole per-set estimate (`estimate_frames`, the frames as
-  one set) against the rig's truth: per static tag the filtered mean's error,
-  per location the object tag's error, in mm; for the default pipeline, for
-  it without corner refinement and with the ArUco detector.
+  (os.sched_setaffinity + cv2.setNumThreads + the AprilTag threads), and of
+  the whole per-set estimate (`estimate_frames`: layout, template fits, PnP);
+- accuracy against the rig's truth on both scenes, our design drawing and a
+  release's poses.json (`rig.scene_poses`; skipped when the file is absent):
+  `--sets` capture sets of `--locations` frames each (own gantry offsets and
+  noise), each estimated on its own (`estimate_frames`) and pooled by
+  `calibrate`, as the workflow calibrates from the background sets; per
+  static tag Table 6's mean against the truth, per gantry location the
+  calibrated object-tag position against the true one (mean over the sets),
+  in mm.
 """
 
 from __future__ import annotations
@@ -30,12 +36,20 @@ import time
 import cv2
 import numpy as np
 
+from pathlib import Path
+
 from denali_pipe import geometry as geo
+from denali_pipe.poses.calibrate import calibrate
 from denali_pipe.poses.detect import TagDetector, quad_centre
 from denali_pipe.poses.estimate import EXPECTED_TAG_IDS, estimate_frames, observe_frame
-from denali_pipe.poses.filtering import filter_estimates, summarise
 from denali_pipe.poses.pnp import Intrinsics
+from denali_pipe.report.table6 import table6
 from denali_pipe.rig.frames import frame_tags, render_frame
+from denali_pipe.rig.nuisances import gantry_offset
+from denali_pipe.rig.tracked_scene import TrackedScene, tracked_scene
+
+RELEASE_POSES = Path(__file__).resolve().parents[2] / "shared" / "denali-assets" / "poses.json"
+GANTRY = {"gantry_repeatability_m": 0.001}  # rig.nuisances' default
 
 VARIANTS = {
     "apriltag": dict(kind="apriltag", refine=False),
@@ -131,16 +145,15 @@ def _pin(cpus: list[int]) -> None:
 _WORKER: dict = {}
 
 
-def _worker_init(cpus_queue, scale: float) -> None:
+def _worker_init(cpus_queue) -> None:
     _pin([cpus_queue.get()])
     cv2.setNumThreads(1)
-    cam = geo.TRACKING_CAMERA.scaled(scale)
-    _WORKER.update(det=TagDetector("apriltag", nthreads=1), intr=intrinsics(cam))
+    _WORKER.update(det=TagDetector("apriltag", nthreads=1))
 
 
 def _worker_frame(item) -> int:
     k, bgr = item
-    observe_frame(k, bgr, _WORKER["det"], _WORKER["intr"])
+    observe_frame(k, bgr, _WORKER["det"])
     return k
 
 
@@ -154,7 +167,7 @@ def two_processes(scale: float, lit: list, cpus: list[int]) -> float:
     for c in cpus[:2]:
         q.put(c)
     items = [(k, bgr) for k, bgr, _ in lit] * 2
-    with ctx.Pool(2, initializer=_worker_init, initargs=(q, scale)) as pool:
+    with ctx.Pool(2, initializer=_worker_init, initargs=(q,)) as pool:
         pool.map(_worker_frame, items[:2], chunksize=1)  # warm up
         t0 = time.perf_counter()
         pool.map(_worker_frame, items, chunksize=1)
@@ -169,15 +182,14 @@ def throughput(scale: float, lit: list, cpus: list[int]) -> None:
         _pin(cpus[:n])
         cv2.setNumThreads(n)
         det = TagDetector("apriltag", nthreads=n)
-        observe_frame(lit[0][0], lit[0][1], det, intr)  # warm up
+        observe_frame(lit[0][0], lit[0][1], det)  # warm up
         t0 = time.perf_counter()
         for k, bgr, _ in lit:
-            observe_frame(k, bgr, det, intr)
-        dt = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        for _, bgr, _ in lit:
-            det.detect(bgr)
+            observe_frame(k, bgr, det)
         dd = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        estimate_frames([(k, bgr) for k, bgr, _ in lit], intr, detector=det)
+        dt = time.perf_counter() - t0
         line.append(f"{n} core{'s' if n > 1 else ''}, {n} thread{'s' if n > 1 else ''}: {len(lit) / dt:5.1f} fps ({1e3 * dt / len(lit):5.1f} ms/frame; detection+refinement {1e3 * dd / len(lit):5.1f})")
     _pin(cpus)
     if len(cpus) >= 2:
@@ -185,40 +197,49 @@ def throughput(scale: float, lit: list, cpus: list[int]) -> None:
     print(f"  scale {scale} ({cam.width}x{cam.height}):\n    " + "\n    ".join(line))
 
 
-def accuracy(scale: float, lit: list) -> None:
+def capture_sets(scene: TrackedScene, scale: float, locations: list[int], n_sets: int) -> tuple[list, dict[int, np.ndarray]]:
+    """`n_sets` sets of lit frames of `scene`, each with its own gantry offsets
+    and noise: ([(set name, [(location, frame)])], true tag-1 centre per
+    location averaged over the sets)."""
     cam = geo.TRACKING_CAMERA.scaled(scale)
-    intr = intrinsics(cam)
-    frames = [(k, bgr) for k, bgr, _ in lit]
-    print(f"\n  accuracy at scale {scale}, {len(frames)} frames as one set (errors in mm)")
-    for name, v in (("apriltag+refine (default)", VARIANTS["apriltag+refine"]), ("apriltag, no refinement", VARIANTS["apriltag"]), ("aruco+refine", VARIANTS["aruco+refine"])):
-        det = TagDetector(v["kind"], refine=v["refine"])
-        t0 = time.perf_counter()
-        df = estimate_frames(frames, intr, set_name="bench", light="lighton", detector=det)
-        dt = time.perf_counter() - t0
-        filt = filter_estimates(df)
-        s = summarise(filt[filt["tag_id"] != geo.OBJECT_TAG_ID], "tag_id", expected=sorted(geo.STATIC_TAGS)).set_index("tag_id")
-        errs = {}
-        for tid, p in geo.STATIC_TAGS.items():
-            m = s.loc[tid, ["x_mean", "y_mean", "z_mean"]].to_numpy(float)
-            errs[tid] = np.linalg.norm(m - p.t) * 1e3 if np.all(np.isfinite(m)) else np.nan
-        obj = df[(df["tag_id"] == geo.OBJECT_TAG_ID) & (df["status"] == "ok")]
-        oerr = np.linalg.norm(obj[["x", "y", "z"]].to_numpy() - geo.tag1_position(obj["location"].to_numpy()), axis=1) * 1e3
-        single = np.linalg.norm(obj[["single_x", "single_y", "single_z"]].to_numpy() - geo.tag1_position(obj["location"].to_numpy()), axis=1) * 1e3
-        cam_err = np.linalg.norm(df.drop_duplicates("location")[["cam_x", "cam_y", "cam_z"]].to_numpy() - cam.position, axis=1) * 1e3
-        flips = int((df["ippe_solution"] == 1).sum())
-        print(f"  {name:26s} static tags: max {np.nanmax(list(errs.values())):5.2f}  " + " ".join(f"{t}:{e:.2f}" for t, e in errs.items()))
-        print(
-            f"  {'':26s} object tag: mean {oerr.mean():5.2f} max {oerr.max():5.2f} (n={len(oerr)}/{len(frames)}); "
-            f"its single-tag PnP: mean {single.mean():5.1f} max {single.max():5.1f}; camera: mean {np.nanmean(cam_err):4.2f} max {np.nanmax(cam_err):4.2f}; "
-            f"IPPE flips {flips}; gantry plane z err {1e3 * (df.attrs['planes']['1']['point'][2] - geo.GANTRY_ORIGIN[2]):+.2f}; {1e3 * dt / len(frames):.0f} ms/frame"
-        )
+    sets, tag1 = [], {k: [] for k in locations}
+    for s in range(n_sets):
+        name = f"NOOBJECT_8inch_S{s}_lighton"
+        frames = []
+        for k in locations:
+            tags = frame_tags(k, "tracking", tuple(gantry_offset(GANTRY, 0, name, k)), scene)
+            tag1[k].append(tags[geo.OBJECT_TAG_ID].t)
+            frames.append((k, render_frame(cam, tags, True, np.random.default_rng([s, k]), scene=scene)[0]))
+        sets.append((name, frames))
+    return sets, {k: np.mean(v, axis=0) for k, v in tag1.items()}
+
+
+def accuracy(scene: TrackedScene, scale: float, locations: list[int], n_sets: int) -> None:
+    cam = geo.TRACKING_CAMERA.scaled(scale)
+    sets, tag1 = capture_sets(scene, scale, locations, n_sets)
+    t0 = time.process_time()  # CPU time: the machine may be shared
+    tables = [estimate_frames(frames, cam.intrinsics, set_name=name, light="lighton") for name, frames in sets]
+    dt = time.process_time() - t0
+    cal = calibrate(tables)
+    t6 = table6(cal.filtered).set_index("tag_id")
+    static = {t: 1e3 * np.linalg.norm(t6.loc[t, ["x_mean_cm", "y_mean_cm", "z_mean_cm"]].to_numpy(float) / 100 - p.t) for t, p in scene.static_tags.items()}
+    objs = cal.object_positions.set_index("location")
+    err = 1e3 * np.array([objs.loc[k, ["x", "y", "z"]].to_numpy(float) - tag1[k] for k in locations])
+    norm = np.linalg.norm(err, axis=1)
+    worst = max(static, key=static.get)
+    print(f"  scale {scale} ({cam.width}x{cam.height}), {n_sets} sets x {len(locations)} locations, {1e3 * dt / (n_sets * len(locations)):.0f} CPU ms/frame")
+    print(f"    static tags (Table 6 mean): mean {np.mean(list(static.values())):.2f} max {static[worst]:.2f} (tag {worst}); " + " ".join(f"{t}:{e:.2f}" for t, e in sorted(static.items())))
+    ax = np.abs(err).mean(axis=0)
+    print(f"    object tag per location: mean |error| x/y/z {ax[0]:.2f}/{ax[1]:.2f}/{ax[2]:.2f}, |error| mean {norm.mean():.2f} max {norm.max():.2f} (location {locations[int(np.argmax(norm))]})")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--locations", type=int, default=20, help="gantry locations (frames) per scale")
+    ap.add_argument("--locations", type=int, default=20, help="gantry locations (frames) per scale and set")
     ap.add_argument("--dark", type=int, default=5, help="lights-off frames per scale")
+    ap.add_argument("--sets", type=int, default=4, help="capture sets pooled for the accuracy (the demo calibrates from 4)")
     ap.add_argument("--scales", type=float, nargs="+", default=[1.0, 0.5, 0.35])
+    ap.add_argument("--poses-json", type=Path, default=RELEASE_POSES, help="the release scene's poses.json")
     args = ap.parse_args()
     cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else list(range(os.cpu_count() or 1))
     print(f"bench_poses: {args.locations} locations per scale, {len(cpus)} CPUs available, OpenCV {cv2.__version__}")
@@ -231,13 +252,19 @@ def main() -> None:
     print("\n== detector comparison (rate: of the tags each frame shows; dark: lights-off frames) ==")
     for s in args.scales:
         compare_detectors(s, *data[s])
-    print("\n== throughput: detection + refinement + board/wall/single-tag PnP per frame ==")
+    print("\n== throughput: the whole per-set estimate (layout, template fits, PnP) and its detection + refinement, per frame ==")
     for s in args.scales:
         throughput(s, data[s][0], cpus)
     cv2.setNumThreads(len(cpus))
-    print("\n== accuracy against the rig's truth ==")
-    for s in args.scales:
-        accuracy(s, data[s][0])
+    scenes = [("design drawing", tracked_scene(None))]
+    if args.poses_json.exists():
+        scenes.append((f"release poses ({args.poses_json})", tracked_scene(args.poses_json)))
+    else:
+        print(f"\n(no {args.poses_json}: the release scene is skipped)")
+    for label, scene in scenes:
+        print(f"\n== accuracy against the rig's truth: {label} (errors in mm) ==")
+        for s in args.scales:
+            accuracy(scene, s, locs, args.sets)
     print(f"\n(expected tags per frame: {list(EXPECTED_TAG_IDS)})")
 
 

@@ -17,7 +17,7 @@ from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_nam
 from denali_pipe.objects import load_catalogue
 from denali_pipe.rig import capture
 
-from conftest import REPO
+from conftest import ASSETS, REPO
 
 N_LOCATIONS = 3
 REPEATS = 2
@@ -181,6 +181,33 @@ def test_release_truth(release_sets, small_config, catalogue):
         assert truth["mount_post"] is True
         assert truth["photometry"] == small_config["rig"]["photometry"]
         assert sorted(truth["locations"], key=int) == [str(int(k)) for k in geo.select_locations(N_LOCATIONS)]
+        assert truth["scene"]["source"] == "design"
+        assert truth["static_tags"] == {str(i): p.to_dict() for i, p in geo.STATIC_TAGS.items()}
+
+
+@pytest.mark.skipif(not (ASSETS / "poses.json").exists(), reason="the release's poses.json is not present")
+def test_release_scene_frames_and_truth(tmp_path, small_config, release_sets):
+    """rig.scene_poses puts the tracked tags where a release's poses.json has
+    them; the truth records that scene; the histograms stay the design's."""
+    path = ASSETS / "poses.json"
+    cfg = copy.deepcopy(small_config)
+    cfg["rig"]["scene_poses"] = str(path)
+    name = OBJECT_SETS[0]
+    (out,) = synth([name], load_catalogue(REPO / "config" / "objects.tsv")["A"], cfg, tmp_path)
+    doc = json.loads(path.read_text())
+    truth = json.loads((out / "rig_truth.json").read_text())
+    assert truth["scene"]["source"] == str(path)
+    for i, p in truth["static_tags"].items():
+        np.testing.assert_allclose(p["t"], doc["tracking_avgposes"][i]["center"])
+    for k, rec in truth["locations"].items():
+        np.testing.assert_allclose(np.subtract(rec["tag1"]["t"], rec["gantry_offset_m"]), doc["tracking_tag1_index_avgposes"][k]["center"])
+    assert truth["scene"]["tables"]["15"]["normal"][2] < np.cos(np.radians(0.5))  # table 15 tilted
+    design = json.loads((release_sets[name] / "rig_truth.json").read_text())
+    assert truth["locations"] == {k: {**v, "tag1": truth["locations"][k]["tag1"]} for k, v in design["locations"].items()}
+    hists, design_hists = load_hists(out), load_hists(release_sets[name])
+    for k, h in hists.items():
+        np.testing.assert_array_equal(h, design_hists[k])
+    assert not np.array_equal(cv2.imread(str(out / "tracking_rgb/000.png")), cv2.imread(str(release_sets[name] / "tracking_rgb/000.png")))
 
 
 # --- determinism --------------------------------------------------------------------

@@ -16,7 +16,7 @@ from denali_pipe.rig.frames import frame_tags, render_frame
 
 @pytest.fixture(scope="module")
 def data():
-    cam = geo.TRACKING_CAMERA.scaled(0.35)
+    cam = geo.TRACKING_CAMERA.scaled(0.5)
     intr = cam.intrinsics
     frames = [(k, render_frame(cam, frame_tags(k, "tracking"), True, np.random.default_rng(k))[0]) for k in (0, 45, 99)]
     est = estimate_frames(frames, intr, set_name="A_8inch_3x3_lighton", light="lighton")

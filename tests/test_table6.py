@@ -12,21 +12,26 @@ from denali_pipe.poses import estimate_frames, filter_estimates
 from denali_pipe.report.paper import TABLE6
 from denali_pipe.report.table6 import TAG_IDS, table6, write_table6
 from denali_pipe.rig.frames import frame_tags, render_frame
+from denali_pipe.rig.tracked_scene import tracked_scene
 
-from conftest import REPO
+from conftest import ASSETS, REPO
 
 PAPER_CSV = REPO.parent / "shared" / "paper" / "table6_paper.csv"
 
 PAPER_COLUMNS = ["tag_id", "component", "n_estimates", "x_mean_cm", "x_std_cm", "y_mean_cm", "y_std_cm", "z_mean_cm", "z_std_cm"]
 
 
+def _estimates(scene_poses=None) -> pd.DataFrame:
+    """Pose rows of six rendered frames of a scene (half-scale tracking camera)."""
+    scene = tracked_scene(scene_poses)
+    cam = geo.TRACKING_CAMERA.scaled(0.5)
+    frames = [(k, render_frame(cam, frame_tags(k, "tracking", scene=scene), True, np.random.default_rng(k), scene=scene)[0]) for k in (0, 20, 40, 60, 80, 99)]
+    return estimate_frames(frames, cam.intrinsics, set_name="A_8inch_3x3_lighton", light="lighton")
+
+
 @pytest.fixture(scope="module")
 def estimates() -> pd.DataFrame:
-    """Pose rows of six rendered frames (third-scale tracking camera)."""
-    cam = geo.TRACKING_CAMERA.scaled(0.35)
-    intr = cam.intrinsics
-    frames = [(k, render_frame(cam, frame_tags(k, "tracking"), True, np.random.default_rng(k))[0]) for k in (0, 20, 40, 60, 80, 99)]
-    return estimate_frames(frames, intr, set_name="A_8inch_3x3_lighton", light="lighton")
+    return _estimates()
 
 
 def test_columns_paper_values_and_order(estimates):
@@ -53,11 +58,23 @@ def test_paper_values_match_the_supplement(estimates):
 def test_values_in_cm_near_the_rig(estimates):
     t = table6(estimates).set_index("tag_id")
     # tag 1 hides 11 or 13 at some gantry locations: fewer estimates, flagged too_few
-    assert t["flag"].isin(["ok", "too_few"]).all() and (t["n_estimates"] >= 4).all()
+    assert t["flag"].isin(["ok", "too_few"]).all() and (t["n_raw"] >= 4).all()
+    assert (t["n_estimates"] >= 3).all()  # six frames differing by image noise only: the any-axis |z| > 2 rule drops some
     assert (t.loc[t["n_raw"] == 6, "flag"] == "ok").all()
     for tid, p in geo.STATIC_TAGS.items():
-        np.testing.assert_allclose(t.loc[tid, ["x_mean_cm", "y_mean_cm", "z_mean_cm"]].to_numpy(float), p.t * 100, atol=0.3)
-    assert (t[["x_std_cm", "y_std_cm"]] < 0.3).all().all()
+        np.testing.assert_allclose(t.loc[tid, ["x_mean_cm", "y_mean_cm", "z_mean_cm"]].to_numpy(float), p.t * 100, atol=0.1)
+    assert (t[["x_std_cm", "y_std_cm", "z_std_cm"]] < 0.1).all().all()
+
+
+@pytest.mark.skipif(not (ASSETS / "poses.json").exists(), reason="the release's poses.json is not present")
+def test_table_tags_are_measured_not_drawn():
+    """On the release's scene Table 6 reports where its tags are (table 15
+    1-1.5 cm up, tags off our grid by up to 3 cm), each within 5 mm."""
+    scene = tracked_scene(ASSETS / "poses.json")
+    t = table6(_estimates(ASSETS / "poses.json")).set_index("tag_id")
+    for tid, p in scene.static_tags.items():
+        np.testing.assert_allclose(t.loc[tid, ["x_mean_cm", "y_mean_cm", "z_mean_cm"]].to_numpy(float), p.t * 100, atol=0.5)
+    assert (t.loc[list(geo.TABLE_TAGS[15]), "z_mean_cm"] > 0.6).all()
 
 
 def test_missing_and_too_few_tags_are_reported(estimates, tmp_path):

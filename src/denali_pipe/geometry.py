@@ -127,10 +127,14 @@ TABLES = {
 
 TAG_FAMILY = "tag36h11"
 TAG_SIZE = 0.06  # black-square edge, m
+TAG_PRINT_SIZE = 0.08  # the printed square: the black square and a 1 cm white margin, m
 OBJECT_TAG_ID = 1
 SENSOR_TAG_ID = 0
 WALL_TAG_IDS = (5, 6, 7)
-TABLE_TAG_IDS = (10, 11, 12, 13, 14, 15)
+# The tags lying on each table top (table id -> tags; the table is named after
+# its tag at the rows' y = 0).
+TABLE_TAGS = {14: (10, 12, 14), 15: (11, 13, 15)}
+TABLE_TAG_IDS = tuple(sorted(i for ids in TABLE_TAGS.values() for i in ids))
 WORLD_ORIGIN_TAG_ID = 14
 
 _WALL_TAG_Y = WALL.centre[1] - 0.001  # tags stand 1 mm proud of the wall
@@ -156,6 +160,30 @@ TAG_COMPONENT = {
     **{i: "relay_wall" for i in WALL_TAG_IDS},
     **{i: "table" for i in TABLE_TAG_IDS},
 }
+
+
+def rect_on_plane(design: Rect, point: np.ndarray, normal: np.ndarray, shift: np.ndarray) -> Rect:
+    """The design rectangle moved by `shift` (3,) and laid onto the plane
+    through `point` (3,) with unit `normal` (3,): its centre projected onto
+    the plane, u the design's u projected, v = normal x u (so u x v = normal)."""
+    c = design.centre + shift
+    c = c - ((c - point) @ normal) * normal
+    u = design.u - (design.u @ normal) * normal
+    u = u / np.linalg.norm(u)
+    return Rect(c, u, np.cross(normal, u), design.size)
+
+
+def table_from_tags(table: int, tags: dict[int, Pose]) -> Rect:
+    """Table `table`'s top from the poses of those of its tags (TABLE_TAGS)
+    that `tags` holds (at least one): the plane through their mean centre
+    with their mean normal (tags lie flat on it, z into the tag), the
+    design's rectangle carried by the tags' mean offset from the design."""
+    ids = [i for i in TABLE_TAGS[table] if i in tags]
+    up = np.mean([-tags[i].R[:, 2] for i in ids], axis=0)
+    up = up / np.linalg.norm(up)
+    centre = np.mean([tags[i].t for i in ids], axis=0)
+    shift = np.mean([tags[i].t - STATIC_TAGS[i].t for i in ids], axis=0)
+    return rect_on_plane(TABLES[table], centre, up, shift)
 
 
 def tag_corners_local(size: float = TAG_SIZE) -> np.ndarray:

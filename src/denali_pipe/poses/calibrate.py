@@ -6,18 +6,15 @@ whatever objects a configuration adds) and runs the same pooling over every
 light-on set for Table 6 and Fig 12.
 
 Inputs are `estimate.detect_set` tables, one per set, pooled. Steps:
-1. `replane`: the sensor tag 0 and the object tag 1 are re-located on
-   horizontal planes whose heights are the median single-tag heights over
-   every set pooled (each set's own estimate rests on its 12-100 frames only).
-2. `filtering.filter_estimates`: |z| > 2 rejection per static tag and per
+1. `filtering.filter_estimates`: |z| > 2 rejection per static tag and per
    (object tag, location).
-3. Summaries: `object_positions`, `scene_dict`, `detection_rates`
+2. Summaries: `object_positions`, `scene_dict`, `detection_rates`
    (Table 6 itself is `report.table6`).
 
-Design-drawing facts used (as for the boards): the wall's and the tables'
-extents relative to their tags, the object mount (geometry.OBJECT_MOUNT) and
-the sensor's offset from tag 0 (`sensor_mount`). Positions and orientations
-come from the estimates.
+Design-drawing facts used: the wall's and the tables' extents relative to
+their tags, the object mount (geometry.OBJECT_MOUNT) and the sensor's offset
+from tag 0 (`sensor_mount`). Positions and orientations, the tables' heights
+and tilts included, come from the estimates.
 """
 
 from __future__ import annotations
@@ -29,11 +26,11 @@ import numpy as np
 import pandas as pd
 
 from denali_pipe import geometry as geo
-from denali_pipe.poses.estimate import HEIGHT_TAG_IDS, STATUSES, check_object_coverage
+from denali_pipe.poses.estimate import STATUSES, check_object_coverage
 from denali_pipe.poses.filtering import DEFAULT_METHOD, THRESHOLD, filter_estimates, summarise
-from denali_pipe.poses.pnp import fit_plane, mean_rotation, rigid_fit
+from denali_pipe.poses.pnp import mean_rotation, rigid_fit
 
-SCENE_VERSION = 1
+SCENE_VERSION = 2  # 2: a plane per table top (table.planes), the tag-1 rotation per location
 
 
 def pool(estimates: pd.DataFrame | Iterable[pd.DataFrame]) -> pd.DataFrame:
@@ -44,28 +41,6 @@ def pool(estimates: pd.DataFrame | Iterable[pd.DataFrame]) -> pd.DataFrame:
     if not frames:
         raise ValueError("no pose estimates to calibrate from (no capture sets)")
     return pd.concat(frames, ignore_index=True)
-
-
-def replane(estimates: pd.DataFrame, heights: dict[int, float] | None = None) -> pd.DataFrame:
-    """Re-locate tags 0 and 1 on horizontal planes at their pooled median
-    single-tag height, or at `heights` {tag id: z (m)} where given (rows
-    located on a horizontal plane, `plane_z` set); returns a copy with x, y,
-    z and plane_z updated and the heights used in df.attrs["plane_heights"]."""
-    df = estimates.copy()
-    known = {int(k): float(v) for k, v in (heights or {}).items()}
-    heights = {}
-    for tid in HEIGHT_TAG_IDS:
-        rows = (df["tag_id"] == tid) & (df["status"] == "ok") & (df["method"] == "plane") & df["plane_z"].notna()
-        if not rows.any():
-            continue
-        h = known.get(tid, float(np.median(df.loc[rows, "single_z"])))
-        s = (h - df.loc[rows, "cam_z"]) / df.loc[rows, "ray_z"]
-        for a in "xyz":
-            df.loc[rows, a] = df.loc[rows, f"cam_{a}"] + s * df.loc[rows, f"ray_{a}"]
-        df.loc[rows, "plane_z"] = h
-        heights[str(tid)] = h
-    df.attrs = {**estimates.attrs, "plane_heights": heights}
-    return df
 
 
 # --- the regression targets ---------------------------------------------------------------
@@ -170,6 +145,11 @@ def _map_design(ids: list[int], means: dict[int, np.ndarray]) -> tuple[np.ndarra
     return np.eye(3), (dst - src).mean(axis=0)
 
 
+def _mean_rotation(rows: pd.DataFrame) -> np.ndarray:
+    """Chordal mean (3, 3) of the rows' tag rotations (`R` column)."""
+    return mean_rotation(np.stack(rows["R"].map(np.asarray).to_list()))
+
+
 def _yaw_only(R: np.ndarray) -> tuple[np.ndarray, float]:
     """The face-up rotation rot_z(yaw) @ FACE_UP nearest R (a tag on a horizontal plane)."""
     x = R[:, 0]
@@ -187,7 +167,7 @@ def scene_dict(filtered: pd.DataFrame, objects: pd.DataFrame) -> dict:
     kept = filtered[filtered["kept"]]
     static = kept[kept["tag_id"].isin(list(geo.STATIC_TAGS))]
     means = {int(t): g[["x", "y", "z"]].mean().to_numpy() for t, g in static.groupby("tag_id")}
-    rots = {int(t): mean_rotation(np.stack(g["R"].map(np.asarray).to_list())) for t, g in static.groupby("tag_id")}
+    rots = {int(t): _mean_rotation(g) for t, g in static.groupby("tag_id")}
     counts = static.groupby("tag_id").size()
 
     tags = {
@@ -195,18 +175,16 @@ def scene_dict(filtered: pd.DataFrame, objects: pd.DataFrame) -> dict:
         for t in sorted(means)
     }
 
-    # Tables: plane through the table tags; rectangles carried from the design.
-    table_ids = [i for i in geo.TABLE_TAG_IDS if i in means]
+    # Tables: each top through its own tags (their heights and tilts), the
+    # rectangle carried from the design by the tags' offset.
+    located = {i: geo.pose(rots[i], means[i]) for i in means}
+    tops = {k: geo.table_from_tags(k, located) for k, ids in geo.TABLE_TAGS.items() if any(i in located for i in ids)}
     table = {}
-    if table_ids:
-        Rt, tt = _map_design(list(geo.TABLE_TAG_IDS), means)
-        rects = {str(k): _rect_dict(Rt @ r.centre + tt, Rt @ r.u, Rt @ r.v, r.size) for k, r in geo.TABLES.items()}
-        plane = None
-        if len(table_ids) >= 3:
-            c, n = fit_plane(np.array([means[i] for i in table_ids]))
-            n = n if n[2] > 0 else -n
-            plane = {"point": c.tolist(), "normal": n.tolist(), "tilt_deg": float(np.degrees(np.arccos(min(1.0, n[2]))))}
-        table = {"plane": plane, "rectangles": rects}
+    if tops:
+        table = {
+            "planes": {str(k): {"point": r.centre.tolist(), "normal": r.normal.tolist(), "tilt_deg": float(np.degrees(np.arccos(min(1.0, r.normal[2]))))} for k, r in tops.items()},
+            "rectangles": {str(k): _rect_dict(r.centre, r.u, r.v, r.size) for k, r in tops.items()},
+        }  # fmt: skip
 
     # Relay wall: its tags' plane; extent from the design relative to the tags;
     # the NLOS wall's normal forced to exactly -y (as the reference twin does).
@@ -249,15 +227,15 @@ def scene_dict(filtered: pd.DataFrame, objects: pd.DataFrame) -> dict:
             "n_frames": int(len(frames)),
         }  # fmt: skip
 
-    # Gantry and objects: the tag translates only, so its rotation pools every location.
+    # Gantry and objects: the tag's pose per location (its tilt may vary with
+    # the carriage's position); the mean rotation over every location beside.
     obj_rows = kept[kept["tag_id"] == geo.OBJECT_TAG_ID]
     gantry, locs = None, {}
     if len(obj_rows):
-        R1 = mean_rotation(np.stack(obj_rows["R"].map(np.asarray).to_list()))
-        heights = sorted(set(obj_rows["plane_z"].dropna()))
-        gantry = {"tag_rotation": R1.tolist(), "plane_z": float(np.median(obj_rows["plane_z"])) if heights else None}
+        gantry = {"tag_rotation": _mean_rotation(obj_rows).tolist()}
+        R1 = {int(k): _mean_rotation(g) for k, g in obj_rows.groupby("location")}
         for r in objects.itertuples():
-            t1 = geo.pose(R1, [r.x, r.y, r.z])
+            t1 = geo.pose(R1[int(r.location)], [r.x, r.y, r.z])
             ob = t1 @ geo.OBJECT_MOUNT
             rec = {"tag1": t1.to_dict(), "object": ob.to_dict(), "n_estimates": int(r.n_estimates)}
             if wall is not None:
@@ -268,8 +246,8 @@ def scene_dict(filtered: pd.DataFrame, objects: pd.DataFrame) -> dict:
         "version": SCENE_VERSION,
         "frame": {
             "units": "m",
-            "origin": f"centre of tag {geo.WORLD_ORIGIN_TAG_ID} (estimated)",
-            "axes": "+x along the table rows toward tags 11/13/15, +y toward the relay wall, +z up",
+            "origin": f"centre of tag {geo.WORLD_ORIGIN_TAG_ID}",
+            "axes": f"tag {geo.WORLD_ORIGIN_TAG_ID}'s: +x along its x axis (toward tags 11/13/15), +y toward the relay wall, +z up (its face)",
         },
         "sets": sorted(set(filtered["set"])),
         "tags": tags,
@@ -288,7 +266,7 @@ def scene_dict(filtered: pd.DataFrame, objects: pd.DataFrame) -> dict:
 
 @dataclass
 class Calibration:
-    estimates: pd.DataFrame  # pooled and re-planed, every row
+    estimates: pd.DataFrame  # pooled, every row
     filtered: pd.DataFrame  # ok rows with `kept`
     object_positions: pd.DataFrame
     detection_rates: pd.DataFrame
@@ -301,17 +279,12 @@ def calibrate(
     locations: Iterable[int] | None = None,
     threshold: float = THRESHOLD,
     method: str = DEFAULT_METHOD,
-    pooled_planes: bool = True,
-    heights: dict[int, float] | None = None,
 ) -> Calibration:
     """Everything the calibration stage derives from the per-set tables of
-    light-on sets: pooled plane heights (`replane`; `heights` fixes known
-    ones), |z| > 2 filtering, object positions, detection rates, scene.
-    Raises ValueError when a gantry location has no usable object-tag
+    light-on sets: |z| > 2 filtering, object positions, detection rates,
+    scene. Raises ValueError when a gantry location has no usable object-tag
     estimate (naming it and the sets)."""
     est = pool(estimates)
-    if pooled_planes or heights:
-        est = replane(est, heights)
     filt = filter_estimates(est, threshold=threshold, method=method)
     objs = object_positions(filt, locations, estimates=est)
     return Calibration(est, filt, objs, detection_rates(est), scene_dict(filt, objs))

@@ -214,11 +214,3 @@ def rigid_fit(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
     R = Vt.T @ D @ U.T
     return R, cd - R @ cs
-
-
-def fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares plane (centroid, unit normal) through N >= 3 points (N, 3)."""
-    p = np.asarray(points, float)
-    c = p.mean(axis=0)
-    _, _, Vt = np.linalg.svd(p - c)
-    return c, Vt[2]

@@ -38,6 +38,7 @@ from denali_pipe.rig.frames import frame_tags, render_frame
 from denali_pipe.rig.histograms import Photometry, Scatterer, counts_from_transport, sample_counts, transport
 from denali_pipe.rig.nuisances import SetNuisance, capture_conditions, draw_set, gantry_offset
 from denali_pipe.rig.scene import mount_scatterer, object_scatterer
+from denali_pipe.rig.tracked_scene import TrackedScene, tracked_scene
 from denali_pipe.seeds import rng_for
 
 PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1]  # fast; ingest recompresses anyway
@@ -82,9 +83,9 @@ def metadata_record(cs: CaptureSet, locations: np.ndarray, rig_cfg: dict) -> dic
     }
 
 
-def truth_record(cs: CaptureSet, spec: ObjectSpec | None, locations: np.ndarray, config: dict) -> dict:
-    """Every true parameter of the set, the nuisances drawn included. For
-    validation only: no stage reads it."""
+def truth_record(cs: CaptureSet, spec: ObjectSpec | None, locations: np.ndarray, config: dict, scene: TrackedScene) -> dict:
+    """Every true parameter of the set, the nuisances drawn included, and the
+    tracked scene its frames show. For validation only: no stage reads it."""
     rig = config["rig"]
     nuisance = draw_set(rig["nuisances"], config["seed"], cs.name)
     return {
@@ -99,17 +100,18 @@ def truth_record(cs: CaptureSet, spec: ObjectSpec | None, locations: np.ndarray,
         "sensor": {"position": geo.SENSOR_POSITION.tolist(), "forward": geo.SENSOR_FORWARD.tolist(), "fov_deg": list(geo.SENSOR_FOV_DEG)},
         "wall": {"centre": geo.WALL.centre.tolist(), "size": list(geo.WALL.size), "normal": geo.WALL.normal.tolist()},
         "cameras": {name: _camera_record(cam) for name, cam in _cameras(rig).items()},
-        "static_tags": {str(i): p.to_dict() for i, p in geo.STATIC_TAGS.items()},
-        "locations": {str(int(k)): _location_truth(cs, int(k), nuisance, config) for k in locations},
+        "scene": scene.to_dict(),
+        "static_tags": {str(i): p.to_dict() for i, p in scene.static_tags.items()},
+        "locations": {str(int(k)): _location_truth(cs, int(k), nuisance, config, scene) for k in locations},
     }
 
 
-def _location_truth(cs: CaptureSet, k: int, nuisance: SetNuisance, config: dict) -> dict:
+def _location_truth(cs: CaptureSet, k: int, nuisance: SetNuisance, config: dict, scene: TrackedScene) -> dict:
     nuisances, seed = config["rig"]["nuisances"], config["seed"]
     offset = gantry_offset(nuisances, seed, cs.name, k)
     obj = nuisance.object_pose(k, offset)
     return {
-        "tag1": frame_tags(k, "tracking", tuple(offset))[geo.OBJECT_TAG_ID].to_dict(),
+        "tag1": frame_tags(k, "tracking", tuple(offset), scene)[geo.OBJECT_TAG_ID].to_dict(),
         "object": obj.to_dict(),
         "gantry_offset_m": offset.tolist(),
         "time_shift_bins": [capture_conditions(nuisances, seed, cs.name, k, r, nuisance).time_shift_bins for r in range(config["rig"]["repeats"])],
@@ -126,7 +128,7 @@ def _scene(cs: CaptureSet, spec: ObjectSpec | None, k: int, offset: np.ndarray, 
     return scene
 
 
-def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisance, config: dict) -> dict:
+def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisance, config: dict, scene: TrackedScene) -> dict:
     """One location of one set: the histograms of every repeat and both cameras' RGB-D frames."""
     rig, seed = config["rig"], config["seed"]
     phot = Photometry.from_config(rig["photometry"])
@@ -143,7 +145,7 @@ def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisan
         ]
     )
     frames = {
-        name: render_frame(cam, frame_tags(k, name, tuple(offset)), cs.light_on, rng_for(seed, cs.name, k, name))
+        name: render_frame(cam, frame_tags(k, name, tuple(offset), scene), cs.light_on, rng_for(seed, cs.name, k, name), scene=scene)
         for name, cam in _cameras(rig).items()
     }
     return {"iter": k, "histogram": hist, "frames": frames}
@@ -167,13 +169,14 @@ def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, ou
     locations = geo.select_locations(config["rig"]["n_locations"])
     writer = {"release": _ReleaseWriter, "pickle": _PickleWriter}[fmt]
     nuisances = {cs.name: draw_set(config["rig"]["nuisances"], config["seed"], cs.name) for cs in sets}
+    scene = tracked_scene(config["rig"]["scene_poses"])
     with ExitStack() as stack:
         writers = [stack.enter_context(writer(out, metadata_record(cs, locations, config["rig"]))) for cs, out in zip(sets, outs)]
         for k in map(int, locations):
             for cs, w in zip(sets, writers):
-                w.add(_record(cs, spec, k, nuisances[cs.name], config))
+                w.add(_record(cs, spec, k, nuisances[cs.name], config, scene))
         for cs, w in zip(sets, writers):
-            w.finish(truth_record(cs, spec, locations, config))
+            w.finish(truth_record(cs, spec, locations, config, scene))
 
 
 class _ReleaseWriter:

@@ -4,13 +4,15 @@ The real capture stores, per gantry location, one aligned colour (bgr8) and
 depth (z16, millimetres) frame from the tracking camera (above and behind the
 scene, 1280x720) and from the co-located camera next to the LiDAR (848x480,
 looking at the relay wall). This module renders frames with the same layout
-from the nominal geometry in `denali_pipe.geometry`, so that the pose stage can
-run the real AprilTag detector on them and recover that geometry.
+from a tracked scene (`rig.tracked_scene`: our design drawing in
+`denali_pipe.geometry`, or a release's measured poses), so that the pose stage
+can run the real AprilTag detector on them and recover that geometry.
 
 Rendering model (all cheap enough for a frame in tens of milliseconds):
-- Background: per-pixel ray casting against the two table tops, the relay
-  wall and a floor, Lambertian shading from two ceiling lights plus ambient.
-  It depends only on the camera, so it is computed once and cached.
+- Background: per-pixel ray casting against the scene's two table tops, its
+  visual wall and a floor, Lambertian shading from two ceiling lights plus
+  ambient. It depends only on the camera and those surfaces, so it is
+  computed once and cached.
 - Tags: each tag (white 8 cm paper square carrying the 6 cm black-bordered
   tag36h11 marker) is warped into its bounding box through the exact plane
   homography, supersampled and box-filtered (anti-aliased), depth-tested
@@ -32,6 +34,7 @@ import numpy as np
 
 from denali_pipe import geometry as g
 from denali_pipe.geometry import Camera, Pose
+from denali_pipe.rig.tracked_scene import TrackedScene, design_scene
 
 # --- scene appearance -----------------------------------------------------------
 
@@ -48,7 +51,6 @@ FLOOR_RGB = np.array([0.22, 0.23, 0.25])
 BACKDROP_RADIANCE = np.array([0.06, 0.06, 0.07])  # dark room beyond 10 m / above the horizon
 TAG_WHITE = 0.85  # printed paper
 TAG_BLACK = 0.04  # printed toner
-TAG_EDGE_WITH_MARGIN = 0.08  # m: the printed tag square including its white margin
 
 # Lighting: two ceiling lights above the tables plus ambient fill. Irradiance
 # units are arbitrary; exposure normalises them (see _EXPOSURE_TARGET_GREY).
@@ -70,7 +72,12 @@ DEPTH_NOISE_REL = 0.002  # 1-sigma relative depth noise of active stereo at ~1 m
 # Tag rasterisation: supersampling factor of the output (box filter) and the
 # minimum marker texture size. Marker textures are 24 * 2^j px so that both
 # the 8 marker cells and the 1 cm margins (1/6 of the marker) are whole pixels.
-_SUPERSAMPLE = 4
+# A box filter over s x s samples puts an edge parallel to the pixel grid (the
+# table tags' edges nearly are) on a 1/s px grid, an error no camera has: at
+# s = 4 the small table tags' fitted corners (poses.template) came out up to
+# 0.05 px off and the pose stage's world frame tilted by 0.05-0.15 deg (1-4 mm
+# at table 15, half-scale frames); at 8 the corners are within 0.002-0.025 px.
+_SUPERSAMPLE = 8
 _MIN_TEXTURE_PX = 64
 _NEAR_M = 0.02  # tags closer than this to the camera plane are skipped
 
@@ -95,9 +102,9 @@ def tag_texture(tag_id: int, px: int) -> np.ndarray:
 
 @lru_cache(maxsize=512)
 def _tag_albedo(tag_id: int, marker_px: int) -> tuple[np.ndarray, np.ndarray]:
-    """Albedo (N, N) float32 of the printed 8 cm tag (marker plus white margin)
-    and its coverage (N, N) ones, N = marker_px * 8/6."""
-    margin = marker_px // 6  # 1 cm of an 6 cm marker
+    """Albedo (N, N) float32 of the printed tag (marker plus white margin,
+    geometry.TAG_PRINT_SIZE) and its coverage (N, N) ones, N = marker_px * 8/6."""
+    margin = round(marker_px * (g.TAG_PRINT_SIZE - g.TAG_SIZE) / (2 * g.TAG_SIZE))
     marker = tag_texture(tag_id, marker_px).astype(np.float32) / 255.0
     n = marker_px + 2 * margin
     tex = np.ones((n, n), np.float32)
@@ -147,7 +154,8 @@ def _camera_key(camera: Camera) -> tuple:
 
 
 class _Background:
-    """Everything about a camera's view that does not change between frames.
+    """Everything about a camera's view of the scene's surfaces (tables, wall,
+    floor) that does not change between frames.
 
     rays (H, W, 3) float32 unit world directions; ray_z (H, W) float32 their
     camera-axis component (z-depth per unit ray length); depth (H, W) float32
@@ -155,7 +163,7 @@ class _Background:
     (H, W, 3) float32 BGR linear radiance; exposure: DN per radiance unit.
     """
 
-    def __init__(self, camera: Camera):
+    def __init__(self, camera: Camera, scene: TrackedScene):
         self.origin = camera.position
         rays = camera.rays()  # (H, W, 3) float64
         # Contiguous components: dot products with fixed 3-vectors as three
@@ -166,7 +174,7 @@ class _Background:
         hw = rays.shape[:2]
 
         # Nearest hit over the bounded planar surfaces (tables, wall).
-        surfaces = [("table", tid, rect) for tid, rect in g.TABLES.items()] + [("wall", None, g.WALL)]
+        surfaces = [("table", tid, rect) for tid, rect in scene.tables.items()] + [("wall", None, scene.wall)]
         t_best = np.full(hw, np.inf)
         which = np.full(hw, -1, np.int8)
         for k, (_, _, rect) in enumerate(surfaces):
@@ -249,30 +257,34 @@ _BG_CACHE: dict[tuple, _Background] = {}
 _BG_CACHE_MAX = 8
 
 
-def _background(camera: Camera) -> _Background:
-    key = _camera_key(camera)
+def _background(camera: Camera, scene: TrackedScene) -> _Background:
+    key = (*_camera_key(camera), scene.surfaces_key())
     bg = _BG_CACHE.get(key)
     if bg is None:
         if len(_BG_CACHE) >= _BG_CACHE_MAX:
             _BG_CACHE.pop(next(iter(_BG_CACHE)))  # oldest first (dicts keep order)
-        bg = _BG_CACHE[key] = _Background(camera)
+        bg = _BG_CACHE[key] = _Background(camera, scene)
     return bg
 
 
 # --- tags ------------------------------------------------------------------------------
 
 
-def frame_tags(location: int, camera_name: str, gantry_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> dict[int, Pose]:
+def frame_tags(
+    location: int, camera_name: str, gantry_offset: tuple[float, float, float] = (0.0, 0.0, 0.0), scene: TrackedScene | None = None
+) -> dict[int, Pose]:
     """Tags present in a frame at gantry `location` (0..99): every static tag
-    plus the object tag 1 at `tag1_pose(location)` moved by the carriage's
-    `gantry_offset` (m, world). The same set serves both cameras; the
-    renderer skips whatever a camera cannot see."""
+    of `scene` (default: the design drawing) plus the object tag 1 at the
+    scene's pose for `location` moved by the carriage's `gantry_offset` (m,
+    world). The same set serves both cameras; the renderer skips whatever a
+    camera cannot see."""
     if camera_name not in (g.TRACKING_CAMERA.name, g.COLOCATED_CAMERA.name):
         raise ValueError(f"unknown camera {camera_name!r}")
     if not 0 <= int(location) < g.N_LOCATIONS:
         raise ValueError(f"gantry location must be 0..{g.N_LOCATIONS - 1}, got {location}")
-    tag1 = g.tag1_pose(int(location))
-    return {**g.STATIC_TAGS, g.OBJECT_TAG_ID: Pose(tag1.R, tag1.t + np.asarray(gantry_offset, float))}
+    scene = scene or design_scene()
+    tag1 = scene.tag1_pose(int(location))
+    return {**scene.static_tags, g.OBJECT_TAG_ID: Pose(tag1.R, tag1.t + np.asarray(gantry_offset, float))}
 
 
 def _draw_tag(
@@ -282,7 +294,7 @@ def _draw_tag(
     normal_out = -tag_pose.R[:, 2]  # tag z points into the tag
     if (bg.origin - tag_pose.t) @ normal_out <= 0:
         return  # seen from behind (or edge-on): the back of the plate
-    corners = tag_pose.apply(g.tag_corners_local(TAG_EDGE_WITH_MARGIN))
+    corners = tag_pose.apply(g.tag_corners_local(g.TAG_PRINT_SIZE))
     uv, z = camera.project(corners)
     if np.any(z < _NEAR_M):
         return  # behind (or straddling) the camera
@@ -346,6 +358,7 @@ def render_frame(
     light_on: bool,
     rng: np.random.Generator,
     *,
+    scene: TrackedScene | None = None,
     blur_sigma_px: float = BLUR_SIGMA_FULL,
     read_noise_dn: float = READ_NOISE_DN,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -354,14 +367,15 @@ def render_frame(
     tags: tag id -> Pose (tag frame -> world, m), e.g. from `frame_tags`.
     light_on: room lights on (normal exposure) or off (dark frame, mean grey
     well below 30). rng: the only source of randomness (sensor noise).
-    blur_sigma_px: optical blur sigma in full-resolution pixels (scaled with
+    scene: whose tables and wall form the background (default: the design
+    drawing; the tags come from `tags`). blur_sigma_px: optical blur sigma in full-resolution pixels (scaled with
     the image). read_noise_dn: Gaussian read noise, DN (8-bit levels).
 
     Returns (bgr, depth): bgr (H, W, 3) uint8; depth (H, W) uint16 z-depth
     along the camera axis in millimetres, 0 where there is no surface within
     10 m. Depth comes from an active stereo sensor, so it ignores `light_on`.
     """
-    bg = _background(camera)
+    bg = _background(camera, scene or design_scene())
     img = (bg.radiance_on if light_on else bg.radiance_off).copy()
     depth = bg.depth.copy()
 
