@@ -36,7 +36,7 @@ def test_magnitudes_follow_the_config(cfg):
 def test_mounting_turns_the_plate_about_its_mount_point():
     s = N.SetNuisance(tilt_deg=3.0, yaw_deg=-2.0, power_gain=1.0, ambient_gain=1.0)
     offset = np.array([0.001, -0.002, 0.0])
-    nominal, mounted = geo.object_pose(45), s.object_pose(45, offset)
+    nominal, mounted = geo.object_pose(45), s.object_pose(geo.tag1_pose(45), offset)
     assert mounted.t == pytest.approx(nominal.t + offset)
     normal_nominal, normal = nominal.R[:, 2], mounted.R[:, 2]
     angle = np.degrees(np.arccos(normal_nominal @ normal))

@@ -109,7 +109,7 @@ def truth_record(cs: CaptureSet, spec: ObjectSpec | None, locations: np.ndarray,
 def _location_truth(cs: CaptureSet, k: int, nuisance: SetNuisance, config: dict, scene: TrackedScene) -> dict:
     nuisances, seed = config["rig"]["nuisances"], config["seed"]
     offset = gantry_offset(nuisances, seed, cs.name, k)
-    obj = nuisance.object_pose(k, offset)
+    obj = nuisance.object_pose(scene.tag1_pose(k), offset)
     return {
         "tag1": frame_tags(k, "tracking", tuple(offset), scene)[geo.OBJECT_TAG_ID].to_dict(),
         "object": obj.to_dict(),
@@ -119,9 +119,10 @@ def _location_truth(cs: CaptureSet, k: int, nuisance: SetNuisance, config: dict,
     }
 
 
-def _scene(cs: CaptureSet, spec: ObjectSpec | None, k: int, offset: np.ndarray, nuisance: SetNuisance) -> list[Scatterer]:
-    """The hidden scene of set `cs` at gantry location `k`, the carriage moved by `offset` (m)."""
-    obj = nuisance.object_pose(k, offset)
+def _scene(cs: CaptureSet, spec: ObjectSpec | None, tag1: geo.Pose, offset: np.ndarray, nuisance: SetNuisance) -> list[Scatterer]:
+    """The hidden scene of set `cs` at the gantry location where tag 1 sits at
+    `tag1`, the carriage moved by `offset` (m)."""
+    obj = nuisance.object_pose(tag1, offset)
     scene = [] if cs.object == "NOOBJECTMOUNT" else [mount_scatterer(obj.t)]
     if spec is not None:
         scene.append(object_scatterer(spec, cs.size, obj))
@@ -133,7 +134,7 @@ def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisan
     rig, seed = config["rig"], config["seed"]
     phot = Photometry.from_config(rig["photometry"])
     offset = gantry_offset(rig["nuisances"], seed, cs.name, k)
-    light = transport(cs.resolution, _scene(cs, spec, k, offset, nuisance))
+    light = transport(cs.resolution, _scene(cs, spec, scene.tag1_pose(k), offset, nuisance))
     hist = np.stack(
         [
             sample_counts(

@@ -50,13 +50,14 @@ class SetNuisance:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
-    def object_pose(self, location: int, gantry_offset: np.ndarray) -> geo.Pose:
-        """The object's local frame -> world at a gantry location, mounted with
-        this set's tilt and yaw and moved by the location's gantry offset (m)."""
-        nominal = geo.object_pose(location)
+    def object_pose(self, tag1: geo.Pose, gantry_offset: np.ndarray) -> geo.Pose:
+        """The object's local frame -> world at the gantry location where tag 1
+        sits at `tag1` (the tracked scene's pose), mounted with this set's
+        tilt and yaw and moved by the location's gantry offset (m)."""
+        nominal = tag1 @ geo.OBJECT_MOUNT
         # local x is horizontal along the plate, local y up: tilt about x, yaw about y
-        mounting = geo.pose(geo.rot_y(self.yaw_deg) @ geo.rot_x(self.tilt_deg), np.zeros(3))
-        return geo.Pose(nominal.R @ mounting.R, nominal.t + gantry_offset)
+        mounting = geo.rot_y(self.yaw_deg) @ geo.rot_x(self.tilt_deg)
+        return geo.Pose(nominal.R @ mounting, nominal.t + gantry_offset)
 
 
 def draw_set(nuisances: dict, seed: int, set_name: str) -> SetNuisance:

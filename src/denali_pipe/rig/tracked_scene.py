@@ -13,10 +13,10 @@ release's measured poses (config `rig.scene_poses`).
   tags' plane 1 mm behind them (as in the reference twin). Their extents are
   the design's, carried by the tags' mean offset from the design.
 
-Only the tracking frames and rig_truth.json use this scene. The histograms'
+The tracking frames, rig_truth.json and the histograms' hidden object (mounted
+on tag 1 of this scene, `rig.nuisances`) use this scene. The histograms'
 relay wall stays `geometry.WALL` (the NLOS wall's normal forced to -y, as the
-reference twin does) and the histograms' object stays on the design grid
-(`rig.nuisances`).
+reference twin does).
 """
 
 from __future__ import annotations
