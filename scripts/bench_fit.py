@@ -54,7 +54,7 @@ def main() -> None:
     split = split_pairs(pairs.keys, cfg["seed"], fit["test_fraction"])
     train = pairs.subset(split.train)
     t1 = time.perf_counter()
-    t = fit_transforms(train, fit["min_sim_fraction"])
+    t = fit_transforms(train)
     t2 = time.perf_counter()
 
     print(f"{len(features)} sets, {len(pairs.real)} captures x {pairs.real.shape[1]} repeats, {pairs.bins} bins from {pairs.crop_start}; fit on {len(split.train)} training captures")

@@ -23,15 +23,16 @@ from denali_pipe.transforms import (
     blur,
     build_pairs,
     fit_transforms,
+    reach,
     read_transforms,
     scale,
+    shifted_copies,
     split_pairs,
     write_transforms,
 )
 from denali_pipe.twin.render import write_twin
 
 CROP, T, R = 77, 51, 3
-MIN_FRACTION = 0.02
 
 
 def rendered_like(n: int, rng: np.random.Generator) -> np.ndarray:
@@ -52,6 +53,18 @@ def pairs_of(real: np.ndarray, sim: np.ndarray) -> Pairs:
     return Pairs(np.asarray(real, np.float32), np.asarray(sim, np.float32), keys, CROP)
 
 
+def pulse_kernel() -> tuple[float, ...]:
+    """A Gaussian pulse (sd 1.2 bins) 2 bins late, like the twin's offset."""
+    k = np.exp(-0.5 * ((np.arange(KERNEL_BINS) - 7) / 1.2) ** 2)
+    return tuple(k / k.sum())
+
+
+def synthetic_pairs(sim: np.ndarray, truth: Transforms, rng: np.random.Generator) -> Pairs:
+    """The twins `sim` paired with R noisy repeats of each through `truth`, in the real bins."""
+    mu = apply(sim, truth, "blurred")
+    return pairs_of(np.stack([add_noise(mu, truth.a_noise, truth.b_noise, rng) for _ in range(R)], axis=1)[..., CROP : CROP + T], sim)
+
+
 def assert_finite(t: Transforms) -> None:
     values = [t.a, t.gamma, *t.kernel, t.a_noise, t.b_noise]
     assert np.all(np.isfinite(values)), t
@@ -69,11 +82,8 @@ def test_recovers_known_transforms(a, gamma):
     ~3,000 counts over a noise floor of variance 100) are fitted back."""
     rng = np.random.default_rng(0)
     sim = rendered_like(800, rng)
-    kernel = np.exp(-0.5 * ((np.arange(KERNEL_BINS) - 7) / 1.2) ** 2)  # 2 bins late, like the twin's offset
-    truth = Transforms(a, gamma, tuple(kernel / kernel.sum()), 1.5, 100.0)
-    mu = apply(sim, truth, "blurred")
-    real = np.stack([add_noise(mu, truth.a_noise, truth.b_noise, rng) for _ in range(R)], axis=1)[..., CROP : CROP + T]
-    fit = fit_transforms(pairs_of(real, sim), MIN_FRACTION)
+    truth = Transforms(a, gamma, pulse_kernel(), 1.5, 100.0)
+    fit = fit_transforms(synthetic_pairs(sim, truth, rng))
     assert fit.a == pytest.approx(truth.a, rel=0.02)
     assert fit.gamma == pytest.approx(truth.gamma, rel=0.02)
     assert np.abs(np.array(fit.kernel) - truth.kernel).sum() <= 0.05
@@ -94,6 +104,16 @@ def test_blur_is_a_centred_convolution():
     k = np.zeros(KERNEL_BINS)
     k[KERNEL_BINS // 2 + 2] = 1.0  # a delay of 2 bins
     assert np.flatnonzero(blur(h, k)[0]).tolist() == [12]
+
+
+def test_shifted_copies_times_kernel_is_the_blur_in_the_real_bins():
+    """The fit's linear form of the blur (`reach`, `shifted_copies`) agrees
+    with `blur` cropped, at the crop's edges too."""
+    sim = rendered_like(4, np.random.default_rng(5))
+    k = np.random.default_rng(6).dirichlet(np.ones(KERNEL_BINS))
+    for crop, bins in [(CROP, geo.N_BINS - CROP), (3, 40)]:
+        linear = shifted_copies(reach(sim.astype(np.float64), crop, bins), bins) @ k
+        assert np.allclose(linear, blur(sim, k)[:, crop : crop + bins], rtol=1e-5, atol=1e-9)
 
 
 def test_apply_fidelities():
@@ -124,21 +144,21 @@ def test_stability_empty_histograms():
     """Twins and captures without any signal (all zeros) among normal pairs."""
     real, sim = noisy_pairs()
     real[:20], sim[:20] = 0.0, 0.0
-    t = fit_transforms(pairs_of(real, sim), MIN_FRACTION)
+    t = fit_transforms(pairs_of(real, sim))
     assert_finite(t)
     for f in FIDELITIES:
         assert np.isfinite(apply(np.zeros((2, geo.N_BINS), np.float32), t, f, np.random.default_rng(0))).all()
     with pytest.raises(ValueError, match="no pairs"):
-        fit_transforms(pairs_of(np.zeros((0, R, T)), np.zeros((0, geo.N_BINS))), MIN_FRACTION)
+        fit_transforms(pairs_of(np.zeros((0, R, T)), np.zeros((0, geo.N_BINS))))
     with pytest.raises(ValueError, match="no pair has a positive simulated bin"):
-        fit_transforms(pairs_of(np.zeros((5, R, T)), np.zeros((5, geo.N_BINS))), MIN_FRACTION)
+        fit_transforms(pairs_of(np.zeros((5, R, T)), np.zeros((5, geo.N_BINS))))
 
 
 def test_stability_all_zero_bins():
     """Twins that are exactly zero outside their bump (log 0 must never be taken)."""
     real, sim = noisy_pairs()
     sim[sim < 0.2 * sim.max(axis=1, keepdims=True)] = 0.0
-    t = fit_transforms(pairs_of(real, sim), MIN_FRACTION)
+    t = fit_transforms(pairs_of(real, sim))
     assert_finite(t)
     assert t.gamma == pytest.approx(1.0, abs=0.2)
 
@@ -148,7 +168,7 @@ def test_stability_negative_values():
     real, sim = noisy_pairs()
     real -= 8.0
     sim[:, :CROP] = -1e-3
-    t = fit_transforms(pairs_of(real, sim), MIN_FRACTION)
+    t = fit_transforms(pairs_of(real, sim))
     assert_finite(t)
     assert np.isfinite(apply(sim, t, "noisy", np.random.default_rng(0))).all()
 
@@ -158,7 +178,7 @@ def test_stability_constant_inputs():
     identified (it stays 1), the variance is zero (b_noise 0, a_noise 1)."""
     sim = np.full((30, geo.N_BINS), 1e-3, np.float32)
     real = np.full((30, R, T), 20.0, np.float32)
-    t = fit_transforms(pairs_of(real, sim), MIN_FRACTION)
+    t = fit_transforms(pairs_of(real, sim))
     assert_finite(t)
     assert t.gamma == 1.0
     assert t.a == pytest.approx(2e4, rel=0.05)
@@ -168,7 +188,7 @@ def test_stability_constant_inputs():
 def test_no_positive_real_mass_is_a_clear_error():
     real, sim = noisy_pairs()
     with pytest.raises(ValueError, match="no object signal"):
-        fit_transforms(pairs_of(-np.abs(real) - 1, sim), MIN_FRACTION)
+        fit_transforms(pairs_of(-np.abs(real) - 1, sim))
 
 
 # --- pairs, split, file ---------------------------------------------------------------------

@@ -280,7 +280,7 @@ def cmd_fit_transforms(args: argparse.Namespace) -> None:
 
     t0 = time.perf_counter()
     pairs, split = _pairs_and_split(args)
-    t = fit_transforms(pairs.subset(split.train), args.config["fit"]["min_sim_fraction"])
+    t = fit_transforms(pairs.subset(split.train))
     record = {"n_pairs": int(len(split.train)), "n_test_pairs": int(len(split.test)), "repeats": int(pairs.real.shape[1]), "crop_start": pairs.crop_start, "bins": pairs.bins, "config": args.config, "seconds": time.perf_counter() - t0}
     write_transforms(Path(args.out), t, record)
     log.info("wrote %s: %s (%.1f s)", args.out, t.to_dict(), record["seconds"])
