@@ -24,7 +24,10 @@ the blur near the crop edge sees the twin's bins before it, as the paper's
 128-bin transforms do.
 
 The fit (`fit_transforms`) is the likelihood of scale, blur and noise
-together.
+together, and `check_fit` says how far it can be trusted: the peak
+signal-to-noise of the captures, bootstrap standard errors and intervals
+over captures, and the parameters the captures do not identify (a warning
+is logged then).
 """
 
 from __future__ import annotations
@@ -60,6 +63,8 @@ FIT_PASSES = 2
 NOISE_PASSES = 2
 # The modelled variance is floored here (counts^2) so that noiseless bins get a finite weight.
 VARIANCE_FLOOR = 1e-12
+# The parameters with one value each (as `Transforms` names them); the kernel is the other.
+SCALARS = ("a", "gamma", "a_noise", "b_noise")
 
 
 @dataclass(frozen=True)
@@ -363,17 +368,147 @@ def fit_transforms(pairs: Pairs) -> Transforms:
     return Transforms(a, gamma, tuple(float(k) for k in kernel), a_noise, b_noise)
 
 
+# --- how far a fit can be trusted -------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Bootstrap:
+    """The fit's spread over `resamples` refits, each on as many captures
+    drawn with replacement (a capture's repeats stay together), drawn from
+    `seed`. se: the standard error (sd over the refits, ddof 1) of each of
+    SCALARS (a float) and of each kernel tap ("kernel": a list);
+    interval: the percentile interval of coverage `level`, [low, high] per
+    parameter (per tap for the kernel); kernel_l1: the mean L1 distance of
+    the refits' kernels from the fitted kernel."""
+
+    resamples: int
+    seed: int
+    level: float
+    se: dict
+    interval: dict
+    kernel_l1: float
+
+
+@dataclass(frozen=True)
+class FitCheck:
+    """peak_snr: the training captures' median `peak_snr`; bootstrap: the
+    fit's spread; noise_se: `noise_information_se` (None where the means do
+    not vary); unidentified: each parameter that the captures do not pin
+    down, with why (empty when the fit is identifiable)."""
+
+    peak_snr: float
+    bootstrap: Bootstrap
+    noise_se: dict | None
+    unidentified: dict
+
+    @property
+    def identifiable(self) -> bool:
+        return not self.unidentified
+
+    def to_dict(self) -> dict:
+        return {
+            "peak_snr": self.peak_snr,
+            "identifiable": self.identifiable,
+            "unidentified": self.unidentified,
+            "noise_se": self.noise_se,
+            "bootstrap": asdict(self.bootstrap),
+        }
+
+
+def peak_snr(pairs: Pairs, t: Transforms) -> float:
+    """Median over the pairs of the modelled mean's peak in the real bins
+    over the modelled noise sd at that peak, for one repeat:
+    max mu / sqrt(a_noise max mu + b_noise), dimensionless (0 without signal)."""
+    peak = np.maximum(model_mean(pairs, t.a, t.gamma, np.array(t.kernel)).max(axis=1), 0.0)
+    return float(np.median(peak / np.sqrt(noise_variance(peak, t.a_noise, t.b_noise))))
+
+
+def bootstrap(pairs: Pairs, t: Transforms, resamples: int, seed: int, level: float) -> Bootstrap:
+    """Refit `resamples` times on captures drawn with replacement from
+    `pairs` (t: the fit on all of them); see `Bootstrap`."""
+    if resamples < 2 or not 0 < level < 1:
+        raise ValueError(f"bootstrap: needs >= 2 resamples and a level in (0, 1), got {resamples} and {level}")
+    rng = np.random.default_rng(seed)
+    n = len(pairs.real)
+    fits = [fit_transforms(pairs.subset(rng.integers(0, n, n))) for _ in range(resamples)]
+    values = {p: np.array([getattr(f, p) for f in fits]) for p in (*SCALARS, "kernel")}
+    tails = (50 * (1 - level), 50 * (1 + level))  # percentiles
+    return Bootstrap(
+        resamples,
+        seed,
+        level,
+        {p: v.std(axis=0, ddof=1).tolist() for p, v in values.items()},
+        {p: np.percentile(v, tails, axis=0).T.tolist() for p, v in values.items()},
+        float(np.abs(values["kernel"] - np.array(t.kernel)).sum(axis=1).mean()),
+    )
+
+
+def noise_information_se(real: np.ndarray, mu: np.ndarray, a_noise: float, b_noise: float) -> dict | None:
+    """{"a_noise", "b_noise"}: their standard errors from the information of
+    the repeats' sample variances, the bounds a_noise >= 1, b_noise >= 0
+    ignored. real: (N, R, T) counts; mu: (N, T) the modelled mean. A bin's
+    sample variance over R repeats varies by 2 Var^2 / (R - 1) about its
+    Var (Gaussian noise), so `fit_noise`'s weighted least squares of it on
+    max(mu, 0) has the textbook line-fit variances, with weights
+    w = (R - 1) / (2 Var^2): 1 / S for the slope and sum(w m^2) / (sum(w) S)
+    for the intercept, S = sum w (m - weighted mean m)^2. None when the
+    modelled means do not vary (S = 0): then no slope can be told from the floor."""
+    m = np.maximum(mu.astype(np.float64), 0.0).ravel()
+    w = (real.shape[1] - 1) / (2 * noise_variance(m, a_noise, b_noise) ** 2)
+    spread = float((w * (m - (w * m).sum() / w.sum()) ** 2).sum())
+    if spread <= 0:
+        return None
+    return {"a_noise": float(np.sqrt(1 / spread)), "b_noise": float(np.sqrt((w * m * m).sum() / w.sum() / spread))}
+
+
+def check_fit(pairs: Pairs, t: Transforms, resamples: int, seed: int, level: float, max_rel_se: float) -> FitCheck:
+    """Bootstrap the fit `t` of `pairs` and judge which parameters the
+    captures identify: a scalar whose standard error exceeds `max_rel_se`
+    of its value, or a kernel whose refits lie further than `max_rel_se`
+    from it (mean L1; the kernel's own L1 norm is 1), is not identified;
+    nor is gamma when the twins hold one level (`one_level`). A noise term's
+    standard error is the larger of the bootstrap's and the information's
+    (`noise_information_se`): a fit on a bound (a_noise = 1, b_noise = 0, as
+    real noise may well be) has refits piled on that bound, whose spread
+    understates what the captures leave open, while the bootstrap holds even
+    where the noise is not Gaussian. Logs a warning naming the parameters
+    not identified and the peak SNR."""
+    boot = bootstrap(pairs, t, resamples, seed, level)
+    noise_se = noise_information_se(pairs.real, model_mean(pairs, t.a, t.gamma, np.array(t.kernel)), t.a_noise, t.b_noise)
+    unidentified = {}
+    if one_level(twin_window(pairs.sim, pairs.crop_start, pairs.bins)):
+        unidentified["gamma"] = "the twins hold one radiance level, which a absorbs: gamma is set to 1"
+    if noise_se is None:
+        unidentified |= dict.fromkeys(("a_noise", "b_noise"), "the modelled means do not vary, so the variance's slope cannot be told from its floor")
+    for p in SCALARS:
+        value, se = abs(getattr(t, p)), max(boot.se[p], (noise_se or {}).get(p, 0.0))
+        rel = se / value if value > 0 else (0.0 if se == 0 else np.inf)
+        if rel > max_rel_se and p not in unidentified:
+            unidentified[p] = f"standard error {rel:.1%} of its value (more than {max_rel_se:.1%})"
+    if boot.kernel_l1 > max_rel_se:
+        unidentified["kernel"] = f"the bootstrap's kernels lie {boot.kernel_l1:.3f} from it (mean L1, more than {max_rel_se})"
+    check = FitCheck(peak_snr(pairs, t), boot, noise_se, unidentified)
+    if unidentified:
+        why = "; ".join(f"{p}: {reason}" for p, reason in unidentified.items())
+        log.warning("the transforms fitted on %d captures (peak SNR %.2f) are not identifiable: %s", len(pairs.real), check.peak_snr, why)
+    return check
+
+
 # --- the file ---------------------------------------------------------------------------
 
 
-def write_transforms(path: Path, t: Transforms, record: dict) -> None:
-    """transforms.json: the parameters plus `record` (what they were fitted on)."""
+def write_transforms(path: Path, t: Transforms, check: FitCheck, record: dict) -> None:
+    """transforms.json: the parameters, their check (under "check") and
+    `record` (what they were fitted on)."""
     with atomic_file(Path(path)) as tmp:
-        tmp.write_text(json.dumps({**t.to_dict(), "kernel_bins": KERNEL_BINS, "bin_width_opl": geo.BIN_WIDTH_OPL, **record}, indent=1) + "\n")
+        body = {**t.to_dict(), "kernel_bins": KERNEL_BINS, "bin_width_opl": geo.BIN_WIDTH_OPL, "check": check.to_dict(), **record}
+        tmp.write_text(json.dumps(body, indent=1) + "\n")
 
 
 def read_transforms(path: Path) -> Transforms:
-    """Read transforms.json; ValueError naming the file when a parameter is missing or out of range."""
+    """Read transforms.json's parameters (files written before fits were
+    checked too); ValueError naming the file when a parameter is missing or
+    out of range."""
     try:
         d = json.loads(Path(path).read_text())
         t = Transforms(float(d["a"]), float(d["gamma"]), tuple(float(k) for k in d["kernel"]), float(d["a_noise"]), float(d["b_noise"]))
@@ -382,3 +517,22 @@ def read_transforms(path: Path) -> Transforms:
     if len(t.kernel) != KERNEL_BINS or not (t.a > 0 and t.gamma > 0 and t.a_noise >= 1 and t.b_noise >= 0):
         raise ValueError(f"{path}: parameters out of range: {t.to_dict()}")
     return t
+
+
+def read_fit_check(path: Path) -> FitCheck:
+    """Read transforms.json's check; ValueError naming the file when it has
+    none (written before fits were checked: refit with `denali fit-transforms`)
+    or it is malformed."""
+    try:
+        d = json.loads(Path(path).read_text())
+    except ValueError as e:
+        raise ValueError(f"{path}: not a transforms file ({type(e).__name__}: {e})") from None
+    if "check" not in d:
+        raise ValueError(f"{path}: no 'check' entry (peak SNR, bootstrap, identifiability); the file predates checked fits: refit it with `denali fit-transforms`")
+    try:
+        c, b = d["check"], d["check"]["bootstrap"]
+        boot = Bootstrap(int(b["resamples"]), int(b["seed"]), float(b["level"]), dict(b["se"]), dict(b["interval"]), float(b["kernel_l1"]))
+        noise_se = None if c["noise_se"] is None else {p: float(c["noise_se"][p]) for p in ("a_noise", "b_noise")}
+        return FitCheck(float(c["peak_snr"]), boot, noise_se, dict(c["unidentified"]))
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"{path}: malformed 'check' entry ({type(e).__name__}: {e})") from None
