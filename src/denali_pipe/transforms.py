@@ -56,7 +56,7 @@ FIDELITIES = ("raw", "scaled", "blurred", "noisy")  # each adds one transform to
 # gamma is searched in this range; the hardware's response is near linear.
 GAMMA_BOUNDS = (0.1, 10.0)
 # Reweighting passes of the fit after its equal-weight one (`fit_transforms`):
-# on twin-like pairs at peak SNRs of 0.25-50 the second moves a by about 1e-4
+# on twin-like pairs at peak SNRs of 0.5-5 the second moves a by about 2e-4
 # relative and a third by about 1e-6.
 FIT_PASSES = 2
 # Noise fit: reweighting passes after the equal-weight one (converged after two).
