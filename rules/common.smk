@@ -209,7 +209,7 @@ def fit_inputs(wildcards):
 
 
 # The fit's and Fig 9's settings: one JSON each, so that a Fig 9 setting reruns no fit.
-FIT_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": {k: FIT[k] for k in ("test_fraction", "min_sim_fraction")}}, sort_keys=True)
+FIT_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": {k: FIT[k] for k in ("test_fraction", "bootstrap")}}, sort_keys=True)
 FIG9_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": FIT}, sort_keys=True)
 # The localiser's optimiser settings are the benchmark's 1D CNN location ones; epochs are Fig 9's own.
 FIG9_HYPER = json.dumps({**TRAIN["hyper"]["cnn1d"]["location"], "epochs": FIT["fig9"]["epochs"]}, sort_keys=True)

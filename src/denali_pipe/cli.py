@@ -276,14 +276,28 @@ def _pairs_and_split(args: argparse.Namespace):
 def cmd_fit_transforms(args: argparse.Namespace) -> None:
     import time
 
-    from denali_pipe.transforms import fit_transforms, write_transforms
+    from denali_pipe.transforms import check_fit, fit_transforms, write_transforms
 
     t0 = time.perf_counter()
     pairs, split = _pairs_and_split(args)
-    t = fit_transforms(pairs.subset(split.train), args.config["fit"]["min_sim_fraction"])
-    record = {"n_pairs": int(len(split.train)), "n_test_pairs": int(len(split.test)), "repeats": int(pairs.real.shape[1]), "crop_start": pairs.crop_start, "bins": pairs.bins, "config": args.config, "seconds": time.perf_counter() - t0}
-    write_transforms(Path(args.out), t, record)
-    log.info("wrote %s: %s (%.1f s)", args.out, t.to_dict(), record["seconds"])
+    train = pairs.subset(split.train)
+    t = fit_transforms(train)
+    t1 = time.perf_counter()
+    boot = args.config["fit"]["bootstrap"]
+    check = check_fit(train, t, boot["resamples"], args.config["seed"], boot["level"], boot["max_rel_se"])
+    t2 = time.perf_counter()
+    record = {
+        "n_pairs": int(len(split.train)),
+        "n_test_pairs": int(len(split.test)),
+        "repeats": int(pairs.real.shape[1]),
+        "crop_start": pairs.crop_start,
+        "bins": pairs.bins,
+        "config": args.config,
+        "seconds": t2 - t0,
+        "bootstrap_seconds": t2 - t1,
+    }
+    write_transforms(Path(args.out), t, check, record)
+    log.info("wrote %s: %s, peak SNR %.2f, identifiable %s (%.1f s, of which the bootstrap %.1f s)", args.out, t.to_dict(), check.peak_snr, check.identifiable, t2 - t0, t2 - t1)
 
 
 def cmd_fig9(args: argparse.Namespace) -> None:
@@ -295,7 +309,7 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     from denali_pipe.fig9 import run_fig9
     from denali_pipe.report.fig9 import write_fig9
     from denali_pipe.train import Hyper
-    from denali_pipe.transforms import read_transforms
+    from denali_pipe.transforms import read_fit_check, read_transforms
 
     torch.set_num_threads(args.threads)
     pairs, _ = _pairs_and_split(args)
@@ -304,6 +318,9 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     if unlabelled:
         raise ValueError(f"{args.positions}: no tag 1 position for locations {unlabelled}")
     xy = np.array([labels[int(k)] for k in pairs.keys["location"]], np.float32)
+    check = read_fit_check(Path(args.transforms))
+    if not check.identifiable:
+        log.warning("%s: the simulated fidelities use transforms the real captures do not identify (%s)", args.transforms, ", ".join(check.unidentified))
     runs = run_fig9(pairs, xy, read_transforms(Path(args.transforms)), args.config["fit"], Hyper(**args.hyper), args.config["seed"])
     out = Path(args.out)
     table = write_fig9(runs, out, out.with_suffix(".csv"))

@@ -22,6 +22,12 @@ The transforms act on the twin's full 128-bin axis; the fit compares their
 output with the real histogram in its cropped bins (`crop_start` onwards), so
 the blur near the crop edge sees the twin's bins before it, as the paper's
 128-bin transforms do.
+
+The fit (`fit_transforms`) is the likelihood of scale, blur and noise
+together, and `check_fit` says how far it can be trusted: the peak
+signal-to-noise of the captures, bootstrap standard errors and intervals
+over captures, and the parameters the captures do not identify (a warning
+is logged then).
 """
 
 from __future__ import annotations
@@ -33,8 +39,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import torch
-from scipy.optimize import minimize_scalar
+from scipy.optimize import minimize_scalar, nnls
 
 from denali_pipe import geometry as geo
 from denali_pipe.atomic import atomic_file
@@ -48,20 +53,18 @@ CENTRE = (1, 1)  # the centre zone of the 3x3 grid: the zone the twin renders
 KERNEL_BINS = 11  # the paper's blur kernel length L
 HALF = KERNEL_BINS // 2
 FIDELITIES = ("raw", "scaled", "blurred", "noisy")  # each adds one transform to the one before
-# The scaling fit pools pairs into this many groups of similar simulated mass
-# before taking logs (see `fit_scale`): enough points to pin gamma, each group
-# holding enough pairs that its summed real mass stands well above the noise.
-SCALE_GROUPS = 16
 # gamma is searched in this range; the hardware's response is near linear.
 GAMMA_BOUNDS = (0.1, 10.0)
-# Blur fit: L-BFGS iterations on an 11-parameter quadratic in k (converges in tens).
-BLUR_ITERATIONS = 200
-# Scale and blur are fitted in turn: the scale first as if unblurred, then again
-# through the fitted kernel (which moves mass across the edges of the fit's
-# windows and of the crop), then the kernel again; a third pass changes nothing.
-SCALE_BLUR_PASSES = 2
+# Reweighting passes of the fit after its equal-weight one (`fit_transforms`):
+# on twin-like pairs at peak SNRs of 0.5-5 the second moves a by about 2e-4
+# relative and a third by about 1e-6.
+FIT_PASSES = 2
 # Noise fit: reweighting passes after the equal-weight one (converged after two).
 NOISE_PASSES = 2
+# The modelled variance is floored here (counts^2) so that noiseless bins get a finite weight.
+VARIANCE_FLOOR = 1e-12
+# The parameters with one value each (as `Transforms` names them); the kernel is the other.
+SCALARS = ("a", "gamma", "a_noise", "b_noise")
 
 
 @dataclass(frozen=True)
@@ -197,137 +200,92 @@ def apply(sim: np.ndarray, t: Transforms, fidelity: str, rng: np.random.Generato
     return add_noise(h, t.a_noise, t.b_noise, rng)
 
 
-# --- the fits ---------------------------------------------------------------------------
+# --- the fit ----------------------------------------------------------------------------
 
 
-def signal_windows(sim: np.ndarray, crop_start: int, bins: int, min_fraction: float) -> np.ndarray:
-    """(N, bins) bool: the real bins where the scale fit sums mass. A bin
-    enters where its twin is at least `min_fraction` of the twin's peak in
-    the cropped window, widened by the kernel's half-length on both sides so
-    that the mass the blur moves out of those bins is still counted. Below
-    that fraction the twin is its numerically empty tail, and the real bins
-    there hold only noise. A twin without any positive bin has no window."""
-    s = sim[:, crop_start : crop_start + bins]
-    peak = s.max(axis=1, keepdims=True, initial=0.0)
-    core = (s >= min_fraction * peak) & (peak > 0)
-    wide = np.zeros_like(core)
-    for d in range(-HALF, HALF + 1):  # dilation by HALF bins
-        shifted = np.roll(core, d, axis=1)
-        if d > 0:
-            shifted[:, :d] = False
-        elif d < 0:
-            shifted[:, d:] = False
-        wide |= shifted
-    return wide
+def reach(h: np.ndarray, crop_start: int, bins: int) -> np.ndarray:
+    """(N, N_BINS) full-axis histograms -> (N, bins + KERNEL_BINS - 1): the
+    bins that the blur draws the real bins crop_start .. crop_start + bins - 1
+    from, HALF more on either side (zero beyond the time axis)."""
+    return np.pad(h, ((0, 0), (HALF, HALF)))[:, crop_start : crop_start + bins + 2 * HALF]
 
 
-def fit_scale(real: np.ndarray, sim: np.ndarray, crop_start: int, min_fraction: float, kernel: np.ndarray) -> tuple[float, float]:
-    """(a, gamma) of tau = a * tau_sim ** gamma by weighted least squares on logs.
-
-    real: (N, R, T) real counts of R >= 2 repeats; sim: (N, N_BINS);
-    kernel: the blur the real data has undergone (a unit impulse before one
-    is fitted; see `fit_transforms`).
-
-    Per-bin logs cannot be used as they stand on this data: the blur moves
-    counts between bins (a per-bin fit reads the pulse's widening as gamma < 1)
-    and background-subtracted bins are noise-dominated (about 48 counts of
-    noise against 20-30 of signal per demo bin), so keeping only positive bins
-    biases the fit upwards and zeros and negatives have no log at all. The
-    fit therefore compares masses: per pair, the real counts (mean over
-    repeats) summed over its `signal_windows` W, against the mass that
-    kernel * (a tau_sim ** gamma) puts into W, which is a times
-    sum_b tau_sim[b] ** gamma * v[b] over the full time axis, v the share of
-    bin b that the kernel moves into W (1 inside W and 0 far outside for a
-    unit impulse; the kernel sums to one, so mass is only moved). Pairs are
-    sorted by simulated mass and pooled into SCALE_GROUPS equal groups; per
-    group, the log of the summed real mass is fitted by log a + the log of
-    the summed sum_b tau_sim ** gamma v, weighted by the inverse variance of
-    the log, (mass / sigma)^2, sigma^2 the group's summed variance of the
-    repeat means (measured across repeats). For each gamma, log a is the
-    weighted linear least-squares intercept; gamma minimises the weighted
-    residual sum of squares (bounded scalar search). Groups whose real mass
-    is not positive have no log and are left out. When the groups' twins do
-    not differ in level gamma is not identified and is 1."""
-    _check_repeats(real, "fit_scale")
-    T = real.shape[-1]
-    win = signal_windows(sim, crop_start, T, min_fraction)
-    keep = win.any(axis=1)
-    if not keep.any():
-        raise ValueError("fit_scale: no pair has a positive simulated bin in the real bins; nothing to scale")
-    full = np.zeros((int(keep.sum()), sim.shape[1]), np.float32)
-    full[:, crop_start : crop_start + T] = win[keep]
-    v = blur(full, np.asarray(kernel)[::-1]).astype(np.float64)  # the share of each bin that lands in W
-    s = np.maximum(sim[keep].astype(np.float64), 0.0)
-    s_ref = s.max()  # fit on s / s_ref <= 1 so that no power of it under- or overflows; a is rescaled at the end
-    s = s / s_ref
-    r64 = real[keep].astype(np.float64)
-    r, noise_var, win = r64.mean(axis=1), r64.var(axis=1, ddof=1) / r64.shape[1], win[keep]
-    order = np.argsort((s * v).sum(axis=1), kind="stable")
-    groups = [g for g in np.array_split(order, min(SCALE_GROUPS, len(order))) if len(g)]
-    real_mass = np.array([(r[g] * win[g]).sum() for g in groups])
-    mass_var = np.array([(noise_var[g] * win[g]).sum() for g in groups])
-    ok = real_mass > 0
-    if not ok.any():
-        raise ValueError(f"fit_scale: the real mass of every group of pairs is <= 0 ({real_mass.tolist()}); the real captures hold no object signal")
-    if not ok.all():
-        log.warning("fit_scale: %d of %d groups have no positive real mass and are left out", (~ok).sum(), len(ok))
-    groups = [g for g, k in zip(groups, ok) if k]
-    log_real = np.log(real_mass[ok])
-    # noise-free groups (zero variance) would take all the weight: floor sigma at 1e-9 of the mass
-    w = 1.0 / np.maximum(mass_var[ok] / real_mass[ok] ** 2, 1e-18)
-    w = w / w.sum()
-
-    def log_sim(gamma: float) -> np.ndarray:
-        p = s**gamma * v  # every group holds a positive simulated bin in its window, so no log of 0
-        return np.log([p[g].sum() for g in groups])
-
-    def log_a(gamma: float) -> float:
-        return float((w * (log_real - log_sim(gamma))).sum())
-
-    def rss(gamma: float) -> float:
-        return float((w * (log_real - log_sim(gamma) - log_a(gamma)) ** 2).sum())
-
-    # gamma moves a group's log mass by its mass-weighted mean log tau_sim: without spread in that, gamma is not identified
-    slopes = np.array([(s[g] * v[g] * np.log(np.where(s[g] > 0, s[g], 1.0))).sum() / (s[g] * v[g]).sum() for g in groups])
-    spread = np.ptp(slopes) if len(groups) > 1 else 0.0
-    gamma = 1.0 if spread < 1e-6 else float(minimize_scalar(rss, bounds=GAMMA_BOUNDS, method="bounded", options={"xatol": 1e-6}).x)
-    return float(np.exp(log_a(gamma) - gamma * np.log(s_ref))), gamma
+def shifted_copies(window: np.ndarray, bins: int) -> np.ndarray:
+    """(N, bins + KERNEL_BINS - 1) `reach` windows -> (N, bins, KERNEL_BINS):
+    column j is the real bins blurred by the unit kernel e_j (a delay of
+    j - HALF bins), so the real bins of `blur(h, k)` are this times k."""
+    return np.stack([window[:, 2 * HALF - j : 2 * HALF - j + bins] for j in range(KERNEL_BINS)], axis=-1)
 
 
-def shifted_copies(scaled: np.ndarray, crop_start: int, bins: int) -> np.ndarray:
-    """(N, bins, KERNEL_BINS): column j is the real bins of `scaled`
-    (N, N_BINS) blurred by the unit kernel e_j, so `blur(scaled, k)` in the
-    real bins is this times k."""
-    eye = np.eye(KERNEL_BINS)
-    return np.stack([blur(scaled, eye[j])[:, crop_start : crop_start + bins] for j in range(KERNEL_BINS)], axis=-1)
+def twin_window(sim: np.ndarray, crop_start: int, bins: int) -> np.ndarray:
+    """The twins' `reach` windows (N, bins + KERNEL_BINS - 1) in float64,
+    negative radiance counted as 0 (as `scale` does). ValueError when no bin
+    is positive: there is nothing to scale."""
+    window = np.maximum(reach(sim.astype(np.float64), crop_start, bins), 0.0)
+    if not (window > 0).any():
+        raise ValueError("fit_transforms: no pair has a positive simulated bin in reach of the real bins; nothing to scale")
+    return window
 
 
-def fit_kernel(real_mean: np.ndarray, scaled: np.ndarray, crop_start: int) -> np.ndarray:
-    """(KERNEL_BINS,) kernel k minimising the MSE between the real bins of
-    k * scaled and real_mean. real_mean: (N, T) counts; scaled: (N, N_BINS)
-    the scaled twins. k = softmax(theta), so it is non-negative and sums to
-    one; theta starts at 0 (a flat kernel) and L-BFGS fits it,
-    deterministically. The blur is linear in k, so the MSE is the quadratic
-    k'Gk - 2c'k + const with G and c summed once over every pair and bin: the
-    fit's cost does not grow with the data. The loss is divided by the real
-    data's mean square so that its size does not depend on the counts' scale."""
-    X = shifted_copies(scaled, crop_start, real_mean.shape[1]).reshape(-1, KERNEL_BINS).astype(np.float64)
-    y = real_mean.astype(np.float64).ravel()
-    norm = max(float((y**2).sum()), 1e-12)
-    G = torch.from_numpy(X.T @ X / norm)
-    c = torch.from_numpy(X.T @ y / norm)
-    theta = torch.zeros(KERNEL_BINS, dtype=torch.float64, requires_grad=True)
-    opt = torch.optim.LBFGS([theta], lr=1.0, max_iter=BLUR_ITERATIONS, tolerance_grad=1e-14, tolerance_change=1e-16, line_search_fn="strong_wolfe")
+def one_level(window: np.ndarray) -> bool:
+    """Whether every positive bin of the twins' windows holds the same
+    radiance (to 1e-6): then tau_sim ** gamma only rescales the twins, which
+    a absorbs, and gamma is not identified."""
+    levels = window[window > 0]
+    return bool(levels.min() >= levels.max() * (1 - 1e-6))
 
-    def closure():
-        opt.zero_grad()
-        k = torch.softmax(theta, 0)
-        loss = k @ G @ k - 2 * c @ k
-        loss.backward()
-        return loss
 
-    opt.step(closure)
-    return torch.softmax(theta.detach(), 0).numpy()
+def _nonneg_lstsq(gram: np.ndarray, moment: np.ndarray, const: float) -> tuple[np.ndarray, float]:
+    """argmin over c >= 0 of the quadratic c'Gc - 2 m'c + const (a residual
+    sum of squares given by its normal equations: gram G (K, K), moment m
+    (K,)), and its minimum. Solved as the NNLS |M c - z|^2 with M'M = G and
+    M'z = m from G's eigendecomposition; directions without curvature are
+    dropped (m, a combination of the design's columns, has no part along them)."""
+    lam, vec = np.linalg.eigh(gram)
+    keep = lam > lam.max() * 1e-12
+    root = np.sqrt(lam[keep])
+    c, _ = nnls(root[:, None] * vec[:, keep].T, vec[:, keep].T @ moment / root)
+    return c, float(const - 2 * moment @ c + c @ gram @ c)
+
+
+def fit_mean(real_mean: np.ndarray, weights: np.ndarray, sim: np.ndarray, crop_start: int) -> tuple[float, float, np.ndarray]:
+    """(a, gamma, kernel) minimising sum w (real_mean - k * (a tau_sim ** gamma))^2
+    over the real bins: weighted least squares of the scale and the blur together.
+
+    real_mean: (N, T) repeat means (counts); weights: (N, T), the inverse
+    variance of each (1 / counts^2); sim: (N, N_BINS) the twins.
+
+    The model is linear in c = a k, which is >= 0 because a > 0 and k >= 0,
+    so for a given gamma the best c is a non-negative least squares on the
+    KERNEL_BINS `shifted_copies` of tau_sim ** gamma; then a = sum c (k sums
+    to one) and k = c / a. gamma minimises the residual of that best c
+    (a profile in one variable, searched in GAMMA_BOUNDS; it has one
+    minimum on twin-like data, checked on a grid down to a peak SNR of 0.25).
+    No log and no sum over chosen bins is taken: every bin enters as it is,
+    zero and negative ones too, so noise does not bias the fit at low signal
+    (a fit of log masses over the bins near the twin's peak lost tens of % of
+    a below a peak SNR of about 1). gamma is 1 when the twins hold one level
+    (`one_level`). ValueError when the best c is 0: no scaled twin correlates
+    with the real counts."""
+    T = real_mean.shape[1]
+    window = twin_window(sim, crop_start, T)
+    s_ref = window.max()
+    s = window / s_ref  # <= 1, so no power of it under- or overflows; a is rescaled at the end
+    y, w = real_mean.astype(np.float64).ravel(), weights.astype(np.float64).ravel()
+    wy = w * y
+
+    def best_c(gamma: float) -> tuple[np.ndarray, float]:
+        x = shifted_copies(s**gamma, T).reshape(-1, KERNEL_BINS)
+        return _nonneg_lstsq(x.T @ (w[:, None] * x), x.T @ wy, float(y @ wy))
+
+    if one_level(window):
+        gamma = 1.0
+    else:
+        gamma = float(minimize_scalar(lambda g: best_c(g)[1], bounds=GAMMA_BOUNDS, method="bounded", options={"xatol": 1e-6}).x)
+    c, _ = best_c(gamma)
+    if not c.sum() > 0:
+        raise ValueError("fit_transforms: the best scale is 0 (no scaled twin correlates positively with the real counts); the real captures hold no object signal")
+    return float(c.sum() / s_ref**gamma), gamma, c / c.sum()
 
 
 def _check_repeats(real: np.ndarray, who: str) -> None:
@@ -348,15 +306,22 @@ def fit_noise(real: np.ndarray, mu: np.ndarray) -> tuple[float, float]:
     b_noise. Weighted least squares of the variances on max(mu, 0): a sample
     variance's spread is proportional to the variance itself, so each bin is
     weighted by 1 / Var^2 of the previous solution (NOISE_PASSES passes from
-    equal weights). Each pass is constrained: if the free solution breaks a
+    equal weights; that is the likelihood of the sample variances, scaled
+    chi-square). Each pass is constrained: if the free solution breaks a
     bound, the best solution on that bound."""
     _check_repeats(real, "fit_noise")
     v = real.astype(np.float64).var(axis=1, ddof=1).ravel()
     m = np.maximum(mu.astype(np.float64), 0.0).ravel()
     ab = _bounded_lstsq(m, v, np.ones_like(v))
     for _ in range(NOISE_PASSES):
-        ab = _bounded_lstsq(m, v, 1.0 / np.maximum(ab[0] * m + ab[1], 1e-12) ** 2)
+        ab = _bounded_lstsq(m, v, 1.0 / noise_variance(m, *ab) ** 2)
     return ab
+
+
+def noise_variance(mu: np.ndarray, a_noise: float, b_noise: float) -> np.ndarray:
+    """The modelled variance of one repeat, a_noise * max(mu, 0) + b_noise
+    (counts^2), floored at VARIANCE_FLOOR so that its inverse is finite."""
+    return np.maximum(a_noise * np.maximum(mu, 0.0) + b_noise, VARIANCE_FLOOR)
 
 
 def _bounded_lstsq(m: np.ndarray, v: np.ndarray, w: np.ndarray) -> tuple[float, float]:
@@ -376,30 +341,174 @@ def _bounded_lstsq(m: np.ndarray, v: np.ndarray, w: np.ndarray) -> tuple[float, 
     return min(feasible, key=lambda ab: float((w * (ab[0] * m + ab[1] - v) ** 2).sum()))
 
 
-def fit_transforms(pairs: Pairs, min_fraction: float) -> Transforms:
-    """Fit scale and blur in turn (SCALE_BLUR_PASSES), then the noise
-    around the blurred scaled twins, all on `pairs` (the training captures)."""
+def model_mean(pairs: Pairs, a: float, gamma: float, kernel: np.ndarray) -> np.ndarray:
+    """(N, T) the scaled, blurred twins in the real bins (counts)."""
+    return pairs.crop(blur(scale(pairs.sim, a, gamma), kernel))
+
+
+def fit_transforms(pairs: Pairs) -> Transforms:
+    """Fit the three transforms together on `pairs` (the training captures):
+    the Gaussian likelihood of the repeat means (`fit_mean`, with the noise
+    model's variance) alternating with that of the repeats' sample variances
+    (`fit_noise`, around the current mean). The first mean fit weighs every
+    bin equally; each of FIT_PASSES passes then refits the noise and the
+    mean with weights R / Var, Var the modelled variance of one repeat; the
+    noise is refitted around the final mean."""
     if len(pairs.real) == 0:
         raise ValueError("fit_transforms: no pairs to fit on")
+    _check_repeats(pairs.real, "fit_transforms")
+    repeats = pairs.real.shape[1]
     real_mean = pairs.real.mean(axis=1, dtype=np.float64)
-    kernel = np.eye(KERNEL_BINS)[HALF]
-    for _ in range(SCALE_BLUR_PASSES):
-        a, gamma = fit_scale(pairs.real, pairs.sim, pairs.crop_start, min_fraction, kernel)
-        scaled = scale(pairs.sim, a, gamma)
-        kernel = fit_kernel(real_mean, scaled, pairs.crop_start)
-    mu = pairs.crop(blur(scaled, kernel))
-    a_noise, b_noise = fit_noise(pairs.real, mu)
+    a, gamma, kernel = fit_mean(real_mean, np.ones_like(real_mean), pairs.sim, pairs.crop_start)
+    for _ in range(FIT_PASSES):
+        mu = model_mean(pairs, a, gamma, kernel)
+        weights = repeats / noise_variance(mu, *fit_noise(pairs.real, mu))
+        a, gamma, kernel = fit_mean(real_mean, weights, pairs.sim, pairs.crop_start)
+    a_noise, b_noise = fit_noise(pairs.real, model_mean(pairs, a, gamma, kernel))
     return Transforms(a, gamma, tuple(float(k) for k in kernel), a_noise, b_noise)
 
 
-def write_transforms(path: Path, t: Transforms, record: dict) -> None:
-    """transforms.json: the parameters plus `record` (what they were fitted on)."""
+# --- how far a fit can be trusted -------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Bootstrap:
+    """The fit's spread over `resamples` refits, each on as many captures
+    drawn with replacement (a capture's repeats stay together), drawn from
+    `seed`. se: the standard error (sd over the refits, ddof 1) of each of
+    SCALARS (a float) and of each kernel tap ("kernel": a list);
+    interval: the percentile interval of coverage `level`, [low, high] per
+    parameter (per tap for the kernel); kernel_l1: the mean L1 distance of
+    the refits' kernels from the fitted kernel."""
+
+    resamples: int
+    seed: int
+    level: float
+    se: dict
+    interval: dict
+    kernel_l1: float
+
+
+@dataclass(frozen=True)
+class FitCheck:
+    """peak_snr: the training captures' median `peak_snr`; bootstrap: the
+    fit's spread; noise_se: `noise_information_se` (None where the means do
+    not vary); unidentified: each parameter that the captures do not pin
+    down, with why (empty when the fit is identifiable)."""
+
+    peak_snr: float
+    bootstrap: Bootstrap
+    noise_se: dict | None
+    unidentified: dict
+
+    @property
+    def identifiable(self) -> bool:
+        return not self.unidentified
+
+    def to_dict(self) -> dict:
+        return {
+            "peak_snr": self.peak_snr,
+            "identifiable": self.identifiable,
+            "unidentified": self.unidentified,
+            "noise_se": self.noise_se,
+            "bootstrap": asdict(self.bootstrap),
+        }
+
+
+def peak_snr(pairs: Pairs, t: Transforms) -> float:
+    """Median over the pairs of the modelled mean's peak in the real bins
+    over the modelled noise sd at that peak, for one repeat:
+    max mu / sqrt(a_noise max mu + b_noise), dimensionless (0 without signal)."""
+    peak = np.maximum(model_mean(pairs, t.a, t.gamma, np.array(t.kernel)).max(axis=1), 0.0)
+    return float(np.median(peak / np.sqrt(noise_variance(peak, t.a_noise, t.b_noise))))
+
+
+def bootstrap(pairs: Pairs, t: Transforms, resamples: int, seed: int, level: float) -> Bootstrap:
+    """Refit `resamples` times on captures drawn with replacement from
+    `pairs` (t: the fit on all of them); see `Bootstrap`."""
+    if resamples < 2 or not 0 < level < 1:
+        raise ValueError(f"bootstrap: needs >= 2 resamples and a level in (0, 1), got {resamples} and {level}")
+    rng = np.random.default_rng(seed)
+    n = len(pairs.real)
+    fits = [fit_transforms(pairs.subset(rng.integers(0, n, n))) for _ in range(resamples)]
+    values = {p: np.array([getattr(f, p) for f in fits]) for p in (*SCALARS, "kernel")}
+    tails = (50 * (1 - level), 50 * (1 + level))  # percentiles
+    return Bootstrap(
+        resamples,
+        seed,
+        level,
+        {p: v.std(axis=0, ddof=1).tolist() for p, v in values.items()},
+        {p: np.percentile(v, tails, axis=0).T.tolist() for p, v in values.items()},
+        float(np.abs(values["kernel"] - np.array(t.kernel)).sum(axis=1).mean()),
+    )
+
+
+def noise_information_se(real: np.ndarray, mu: np.ndarray, a_noise: float, b_noise: float) -> dict | None:
+    """{"a_noise", "b_noise"}: their standard errors from the information of
+    the repeats' sample variances, the bounds a_noise >= 1, b_noise >= 0
+    ignored. real: (N, R, T) counts; mu: (N, T) the modelled mean. A bin's
+    sample variance over R repeats varies by 2 Var^2 / (R - 1) about its
+    Var (Gaussian noise), so `fit_noise`'s weighted least squares of it on
+    max(mu, 0) has the textbook line-fit variances, with weights
+    w = (R - 1) / (2 Var^2): 1 / S for the slope and sum(w m^2) / (sum(w) S)
+    for the intercept, S = sum w (m - weighted mean m)^2. None when the
+    modelled means do not vary (S = 0): then no slope can be told from the floor."""
+    m = np.maximum(mu.astype(np.float64), 0.0).ravel()
+    w = (real.shape[1] - 1) / (2 * noise_variance(m, a_noise, b_noise) ** 2)
+    spread = float((w * (m - (w * m).sum() / w.sum()) ** 2).sum())
+    if spread <= 0:
+        return None
+    return {"a_noise": float(np.sqrt(1 / spread)), "b_noise": float(np.sqrt((w * m * m).sum() / w.sum() / spread))}
+
+
+def check_fit(pairs: Pairs, t: Transforms, resamples: int, seed: int, level: float, max_rel_se: float) -> FitCheck:
+    """Bootstrap the fit `t` of `pairs` and judge which parameters the
+    captures identify: a scalar whose standard error exceeds `max_rel_se`
+    of its value, or a kernel whose refits lie further than `max_rel_se`
+    from it (mean L1; the kernel's own L1 norm is 1), is not identified;
+    nor is gamma when the twins hold one level (`one_level`). A noise term's
+    standard error is the larger of the bootstrap's and the information's
+    (`noise_information_se`): a fit on a bound (a_noise = 1, b_noise = 0, as
+    real noise may well be) has refits piled on that bound, whose spread
+    understates what the captures leave open, while the bootstrap holds even
+    where the noise is not Gaussian. Logs a warning naming the parameters
+    not identified and the peak SNR."""
+    boot = bootstrap(pairs, t, resamples, seed, level)
+    noise_se = noise_information_se(pairs.real, model_mean(pairs, t.a, t.gamma, np.array(t.kernel)), t.a_noise, t.b_noise)
+    unidentified = {}
+    if one_level(twin_window(pairs.sim, pairs.crop_start, pairs.bins)):
+        unidentified["gamma"] = "the twins hold one radiance level, which a absorbs: gamma is set to 1"
+    if noise_se is None:
+        unidentified |= dict.fromkeys(("a_noise", "b_noise"), "the modelled means do not vary, so the variance's slope cannot be told from its floor")
+    for p in SCALARS:
+        value, se = abs(getattr(t, p)), max(boot.se[p], (noise_se or {}).get(p, 0.0))
+        rel = se / value if value > 0 else (0.0 if se == 0 else np.inf)
+        if rel > max_rel_se and p not in unidentified:
+            unidentified[p] = f"standard error {rel:.1%} of its value (more than {max_rel_se:.1%})"
+    if boot.kernel_l1 > max_rel_se:
+        unidentified["kernel"] = f"the bootstrap's kernels lie {boot.kernel_l1:.3f} from it (mean L1, more than {max_rel_se})"
+    check = FitCheck(peak_snr(pairs, t), boot, noise_se, unidentified)
+    if unidentified:
+        why = "; ".join(f"{p}: {reason}" for p, reason in unidentified.items())
+        log.warning("the transforms fitted on %d captures (peak SNR %.2f) are not identifiable: %s", len(pairs.real), check.peak_snr, why)
+    return check
+
+
+# --- the file ---------------------------------------------------------------------------
+
+
+def write_transforms(path: Path, t: Transforms, check: FitCheck, record: dict) -> None:
+    """transforms.json: the parameters, their check (under "check") and
+    `record` (what they were fitted on)."""
     with atomic_file(Path(path)) as tmp:
-        tmp.write_text(json.dumps({**t.to_dict(), "kernel_bins": KERNEL_BINS, "bin_width_opl": geo.BIN_WIDTH_OPL, **record}, indent=1) + "\n")
+        body = {**t.to_dict(), "kernel_bins": KERNEL_BINS, "bin_width_opl": geo.BIN_WIDTH_OPL, "check": check.to_dict(), **record}
+        tmp.write_text(json.dumps(body, indent=1) + "\n")
 
 
 def read_transforms(path: Path) -> Transforms:
-    """Read transforms.json; ValueError naming the file when a parameter is missing or out of range."""
+    """Read transforms.json's parameters (files written before fits were
+    checked too); ValueError naming the file when a parameter is missing or
+    out of range."""
     try:
         d = json.loads(Path(path).read_text())
         t = Transforms(float(d["a"]), float(d["gamma"]), tuple(float(k) for k in d["kernel"]), float(d["a_noise"]), float(d["b_noise"]))
@@ -408,3 +517,22 @@ def read_transforms(path: Path) -> Transforms:
     if len(t.kernel) != KERNEL_BINS or not (t.a > 0 and t.gamma > 0 and t.a_noise >= 1 and t.b_noise >= 0):
         raise ValueError(f"{path}: parameters out of range: {t.to_dict()}")
     return t
+
+
+def read_fit_check(path: Path) -> FitCheck:
+    """Read transforms.json's check; ValueError naming the file when it has
+    none (written before fits were checked: refit with `denali fit-transforms`)
+    or it is malformed."""
+    try:
+        d = json.loads(Path(path).read_text())
+    except ValueError as e:
+        raise ValueError(f"{path}: not a transforms file ({type(e).__name__}: {e})") from None
+    if "check" not in d:
+        raise ValueError(f"{path}: no 'check' entry (peak SNR, bootstrap, identifiability); the file predates checked fits: refit it with `denali fit-transforms`")
+    try:
+        c, b = d["check"], d["check"]["bootstrap"]
+        boot = Bootstrap(int(b["resamples"]), int(b["seed"]), float(b["level"]), dict(b["se"]), dict(b["interval"]), float(b["kernel_l1"]))
+        noise_se = None if c["noise_se"] is None else {p: float(c["noise_se"][p]) for p in ("a_noise", "b_noise")}
+        return FitCheck(float(c["peak_snr"]), boot, noise_se, dict(c["unidentified"]))
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"{path}: malformed 'check' entry ({type(e).__name__}: {e})") from None
