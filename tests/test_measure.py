@@ -21,6 +21,7 @@ def test_measure_reads_floors_peak_and_bump():
     assert m.bump_bin == 100 and m.bump_excess == pytest.approx(500)
     assert m.bump_fwhm == pytest.approx(2 * np.sqrt(2 * np.log(2)) * 2.0, rel=0.05)
     assert m.bump_over_floor == pytest.approx(2.5)
+    assert m.late_over_floor == pytest.approx(0.5)
     assert m.bump_fraction == pytest.approx(500 / 10200, rel=1e-3)
 
 

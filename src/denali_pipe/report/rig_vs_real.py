@@ -70,7 +70,7 @@ def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path) ->
         capture = obj.histogram(obj.index_of(k))[0][CENTRE_ZONE].astype(float)
         background = bg.histogram(bg.index_of(k)).mean(0)[CENTRE_ZONE]
         m = measure(capture, background)
-        rows.append({"source": "capture source", "set": obj.capture_set.name, "location": k, **m.to_dict(), "late_over_floor": m.floor_after / m.floor_before})
+        rows.append({"source": "capture source", "set": obj.capture_set.name, "location": k, **m.to_dict()})
         panels.append((obj.capture_set, k, capture, background, m))
     table = pd.DataFrame(rows + real_rows()).reindex(columns=list(COLUMNS))
 
@@ -92,7 +92,7 @@ def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path) ->
         ax.set_title(f"{cs.object} {cs.size} {cs.light}, location {k}", fontsize=9)
         text = (
             f"direct peak {m.direct_peak:,.0f} (off scale)\n"
-            f"floor {100 * m.floor_fraction:.1f} % of peak; late/floor {m.floor_after / m.floor_before:.2f}\n"
+            f"floor {100 * m.floor_fraction:.1f} % of peak; late/floor {m.late_over_floor:.2f}\n"
             f"bump {m.bump_excess:,.0f} = {100 * m.bump_fraction:.1f} % of peak = {m.bump_over_floor:.1f}x floor\n"
             f"bump FWHM {m.bump_fwhm:.1f} bins"
         )

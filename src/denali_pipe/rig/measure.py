@@ -50,12 +50,18 @@ class CentreZone:
     def bump_over_floor(self) -> float:
         return self.bump_excess / self.floor_before
 
+    @property
+    def late_over_floor(self) -> float:
+        """Late floor over the pre-peak floor (below 1: the dead time after the direct return)."""
+        return self.floor_after / self.floor_before
+
     def to_dict(self) -> dict:
         return {
             **dataclasses.asdict(self),
             "floor_fraction": self.floor_fraction,
             "bump_fraction": self.bump_fraction,
             "bump_over_floor": self.bump_over_floor,
+            "late_over_floor": self.late_over_floor,
         }
 
 
