@@ -346,6 +346,39 @@ def test_pickle_stream(pickle_run, release_sets):
         assert truth == json.loads((release_sets[name] / "rig_truth.json").read_text())
 
 
+# --- public layout --------------------------------------------------------------------
+
+
+def test_public_layout_is_the_published_release(release_sets, tmp_path, catalogue, small_config):
+    cfg = copy.deepcopy(small_config)
+    cfg["rig"]["layout"] = "public"
+    names = ["A_8inch_3x3_lighton", "A_8inch_3x3_lightoff"]
+    outs = synth(names, catalogue["A"], cfg, tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"{n}{FOLDER_SUFFIX}" for n in names)
+    stems = [f"{int(k):03d}" for k in geo.select_locations(N_LOCATIONS)]
+    for name, set_dir in zip(names, outs):
+        # the release's two folders, plus the truth no stage reads; no metadata.json
+        assert {p.name for p in set_dir.iterdir()} == {"spad_histogram", "tracking_rgb", "rig_truth.json"}
+        assert sorted(p.name for p in (set_dir / "tracking_rgb").iterdir()) == [f"{s}.png" for s in stems]
+        for stem in stems:
+            # the real 1280x720 whatever rig.frames says (0.25 here)
+            assert cv2.imread(str(set_dir / "tracking_rgb" / f"{stem}.png"), cv2.IMREAD_UNCHANGED).shape == (720, 1280, 3)
+        # the layout changes what is written, not the physics
+        ref = load_hists(release_sets[name])
+        for k, h in load_hists(set_dir).items():
+            np.testing.assert_array_equal(h, ref[k])
+        truth = json.loads((set_dir / "rig_truth.json").read_text())
+        assert set(truth["cameras"]) == {"tracking"}
+
+
+def test_public_layout_is_for_release_folders_only(tmp_path, catalogue, small_config):
+    cfg = copy.deepcopy(small_config)
+    cfg["rig"]["layout"] = "public"
+    with pytest.raises(ValueError, match="rig.layout 'public' is a release-folder layout"):
+        synth(["A_8inch_3x3_lighton"], catalogue["A"], cfg, tmp_path, fmt="pickle")
+    assert list(tmp_path.iterdir()) == []
+
+
 # --- atomic outputs -------------------------------------------------------------------
 
 

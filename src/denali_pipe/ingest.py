@@ -88,7 +88,9 @@ def ingest_release(set_dir: Path, out: Path, spec: ObjectSpec | None) -> pd.Data
     none), must list the set's `locations`, else the histogram files name
     them; spad_histogram/ must hold exactly one NNN.npy per listed location, and each frame folder that
     exists exactly one NNN.png per listed location (a frame folder that does
-    not exist is a modality the set lacks)."""
+    not exist is a modality the set lacks). Nothing else in the folder (the
+    rig's rig_truth.json, Snakemake's .snakemake_timestamp) is read or
+    checksummed."""
     set_dir = Path(set_dir)
     cs = _parse_name(set_dir)
     _check_spec(cs, spec, set_dir)

@@ -7,6 +7,8 @@ from pathlib import Path
 
 HISTOGRAM_DIR = "spad_histogram"
 FRAME_DIRS = ("tracking_rgb", "tracking_depth", "colocated_rgb", "colocated_depth")
+# The published release's frames: tracking colour only (and no metadata.json).
+PUBLIC_FRAME_DIRS = ("tracking_rgb",)
 METADATA_FILE = "metadata.json"
 
 _NNN = re.compile(r"^(\d{3})\.npy$")

@@ -1,6 +1,6 @@
 """Synthesise capture sets in the release layout or as raw pickle streams.
 
-Release layout (what the real rig's converter writes):
+Release layout (what the real rig's converter writes), `rig.layout: full`:
 
     <set>_NLOSdata/
       spad_histogram/NNN.npy     (repeats, n, n, 128) int32, NNN = gantry location
@@ -10,6 +10,11 @@ Release layout (what the real rig's converter writes):
       colocated_depth/NNN.png    uint16, mm
       metadata.json              the capture's metadata record
       rig_truth.json             every true parameter (validation only)
+
+`rig.layout: public` writes what the published release holds instead:
+spad_histogram/ and tracking_rgb/ only, the tracking frames at the real
+camera's 1280x720 whatever `rig.frames` says, no metadata.json (and
+rig_truth.json, which no stage reads).
 
 Pickle stream `<set>_short_NLOSdata.pkl`: the metadata record, then one
 record per location {iter, histogram, spad_realsense_data,
@@ -23,6 +28,7 @@ import dataclasses
 import json
 import pickle
 from contextlib import ExitStack
+from functools import partial
 from pathlib import Path
 from typing import Iterator
 
@@ -32,7 +38,7 @@ import numpy as np
 from denali_pipe import geometry as geo
 from denali_pipe.atomic import atomic_dir, atomic_file
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet
-from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE
+from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE, PUBLIC_FRAME_DIRS
 from denali_pipe.objects import BACKGROUND_SIZE, ObjectSpec
 from denali_pipe.rig.frames import frame_tags, render_frame
 from denali_pipe.rig.histograms import Photometry, Scatterer, counts_from_transport, sample_counts, transport
@@ -46,6 +52,11 @@ TRUTH_FILE = "rig_truth.json"
 
 
 def _cameras(rig_cfg: dict) -> dict[str, geo.Camera]:
+    """The cameras whose frames the layout holds: both RealSenses at the
+    configured fractions of their real size (`full`), or the tracking camera
+    alone at its real size (`public`, as the published release)."""
+    if rig_cfg["layout"] == "public":
+        return {"tracking": geo.TRACKING_CAMERA}
     frames = rig_cfg["frames"]
     return {
         "tracking": geo.TRACKING_CAMERA.scaled(frames["tracking_scale"]),
@@ -62,7 +73,6 @@ def metadata_record(cs: CaptureSet, locations: np.ndarray, rig_cfg: dict) -> dic
     plus the firmware and camera settings). No wall-clock time, so reruns are
     byte-identical."""
     fw = geo.FIRMWARE[cs.resolution]
-    cams = _cameras(rig_cfg)
     return {
         "object": cs.object,
         "size": cs.size,
@@ -77,8 +87,7 @@ def metadata_record(cs: CaptureSet, locations: np.ndarray, rig_cfg: dict) -> dic
         "spad_map": fw.spad_map,
         "period_ms": fw.period_ms,
         "kilo_iterations": fw.kilo_iterations,
-        "tracking_camera": cams["tracking"].intrinsics.to_dict(),
-        "colocated_camera": cams["colocated"].intrinsics.to_dict(),
+        **{f"{name}_camera": cam.intrinsics.to_dict() for name, cam in _cameras(rig_cfg).items()},
         "source": "denali-pipe synthetic rig",
     }
 
@@ -154,7 +163,8 @@ def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisan
 
 def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, outs: list[Path], fmt: str) -> None:
     """Write capture sets of one object and size (any resolutions and lightings)
-    to `outs`: release folders (fmt `release`) or pickle streams (fmt `pickle`).
+    to `outs`: release folders in `rig.layout` (fmt `release`) or pickle
+    streams (fmt `pickle`, layout `full` only).
     Each output is written atomically. Every set is its own mounting and
     session (`rig.nuisances`), so each computes its own light transport."""
     if len({(s.object, s.size) for s in sets}) != 1:
@@ -162,13 +172,16 @@ def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, ou
     if len(outs) != len(sets):
         raise ValueError(f"synth_sets: {len(sets)} sets but {len(outs)} outputs")
     suffix = {"release": FOLDER_SUFFIX, "pickle": PICKLE_SUFFIX}[fmt]
+    layout = config["rig"]["layout"]
+    if fmt == "pickle" and layout != "full":
+        raise ValueError(f"rig.layout {layout!r} is a release-folder layout: a pickle stream holds both cameras' frames (use layout full)")
     for cs, out in zip(sets, outs):
         if Path(out).name != cs.name + suffix:
             raise ValueError(f"output {out} of capture set {cs.name}: a {fmt} output is named {cs.name}{suffix}")
         if cs.is_background and cs.size != BACKGROUND_SIZE:
             raise ValueError(f"capture set {cs.name}: background sets are captured at {BACKGROUND_SIZE} only")
     locations = geo.select_locations(config["rig"]["n_locations"])
-    writer = {"release": _ReleaseWriter, "pickle": _PickleWriter}[fmt]
+    writer = {"release": partial(_ReleaseWriter, layout=layout), "pickle": _PickleWriter}[fmt]
     nuisances = {cs.name: draw_set(config["rig"]["nuisances"], config["seed"], cs.name) for cs in sets}
     scene = tracked_scene(config["rig"]["scene_poses"])
     with ExitStack() as stack:
@@ -181,15 +194,19 @@ def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, ou
 
 
 class _ReleaseWriter:
-    """`<set>_NLOSdata/` in the release layout, built in a temporary folder."""
+    """`<set>_NLOSdata/` in the release layout, built in a temporary folder:
+    every frame folder and metadata.json (`full`), or only the published
+    release's frame folders and no metadata.json (`public`)."""
 
-    def __init__(self, out: Path, metadata: dict):
-        self.out, self.metadata = out, metadata
+    def __init__(self, out: Path, metadata: dict, layout: str):
+        self.out = out
+        self.metadata = metadata if layout == "full" else None
+        self.frame_dirs = FRAME_DIRS if layout == "full" else PUBLIC_FRAME_DIRS
         self._ctx = atomic_dir(out)
 
     def __enter__(self):
         self.tmp = self._ctx.__enter__()
-        for sub in (HISTOGRAM_DIR, *FRAME_DIRS):
+        for sub in (HISTOGRAM_DIR, *self.frame_dirs):
             (self.tmp / sub).mkdir()
         return self
 
@@ -197,11 +214,13 @@ class _ReleaseWriter:
         name = f"{rec['iter']:03d}"
         np.save(self.tmp / HISTOGRAM_DIR / f"{name}.npy", rec["histogram"])
         for cam, (rgb, depth) in rec["frames"].items():
-            cv2.imwrite(str(self.tmp / f"{cam}_rgb" / f"{name}.png"), rgb, PNG_PARAMS)
-            cv2.imwrite(str(self.tmp / f"{cam}_depth" / f"{name}.png"), depth, PNG_PARAMS)
+            for sub, img in ((f"{cam}_rgb", rgb), (f"{cam}_depth", depth)):
+                if sub in self.frame_dirs:
+                    cv2.imwrite(str(self.tmp / sub / f"{name}.png"), img, PNG_PARAMS)
 
     def finish(self, truth: dict) -> None:
-        _write_json(self.tmp / METADATA_FILE, self.metadata)
+        if self.metadata is not None:
+            _write_json(self.tmp / METADATA_FILE, self.metadata)
         _write_json(self.tmp / TRUTH_FILE, truth)
 
     def __exit__(self, *exc):
