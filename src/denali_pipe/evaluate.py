@@ -1,0 +1,124 @@
+"""A saved training cell, loaded to predict, embed or score other data.
+
+A cell's run directory holds `model.pt` (train.run_cell's `Result.state`:
+the selected epoch's weights, the normalisation statistics, the class names,
+the cell and its settings). `load_cell` rebuilds the model from it; the
+functions below take (N, n, n, T) background-subtracted features, the same
+kind of array the cell was trained on, and return per-sample arrays.
+
+Used by `denali evaluate` (a cell scored on another dataset, e.g. the
+variant sets of Figs 10/11), the t-SNE figures and the explorer.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+from torch import nn
+
+from denali_pipe.models import build_model
+from denali_pipe.preprocess import normalise
+from denali_pipe.train import EVAL_BATCH, SIZE_CLASSES, Cell, Hyper, task_metrics
+
+MODEL_FILE = "model.pt"
+METRICS_FILE = "metrics.json"
+
+
+@dataclass(frozen=True)
+class TrainedCell:
+    """A cell's model in eval mode and what feeding it needs.
+
+    classes: class names in output order (None for location, whose two
+    outputs are x, y in metres); norm_stats: `preprocess.normalise`'s (mu,
+    sigma) of the cell's training part (None for raw input)."""
+
+    model: nn.Module
+    cell: Cell
+    hyper: Hyper
+    norm_stats: tuple[float, float] | None
+    classes: list[str] | None
+    input_shape: tuple[int, int, int]  # (n, n, T)
+
+
+def load_cell(run_dir: Path) -> TrainedCell:
+    """The cell saved in `run_dir` (a neural cell; the linear reference
+    model saves no weights). ValueError naming the file if it is missing or
+    not a cell's state; the model's input shape comes from the cell's
+    metrics.json beside it."""
+    path = Path(run_dir) / MODEL_FILE
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+        cell, hyper, weights = Cell(**state["cell"]), Hyper(**state["hyper"]), state["model"]
+    except (OSError, RuntimeError, KeyError, TypeError) as e:
+        raise ValueError(f"{path}: not a training cell's saved model ({e})") from None
+    metrics_path = Path(run_dir) / METRICS_FILE
+    try:
+        n, _, bins = json.loads(metrics_path.read_text())["input_shape"]
+    except (OSError, ValueError, KeyError) as e:
+        raise ValueError(f"{metrics_path}: no input shape of the cell ({e})") from None
+    classes = state["classes"]
+    model = build_model(cell.model, cell.task, n=n, bins=bins, n_classes=2 if classes is None else len(classes))
+    model.load_state_dict(weights)
+    model.eval()
+    stats = None if state["norm_stats"] is None else tuple(float(v) for v in state["norm_stats"])
+    return TrainedCell(model, cell, hyper, stats, classes, (int(n), int(n), int(bins)))
+
+
+def _inputs(trained: TrainedCell, x: np.ndarray) -> torch.Tensor:
+    if x.ndim != 4 or x.shape[1:3] != trained.input_shape[:2]:
+        raise ValueError(f"features {x.shape} do not fit a {trained.cell.resolution} cell: expected (N, {trained.input_shape[0]}, {trained.input_shape[1]}, T)")
+    return torch.from_numpy(np.ascontiguousarray(normalise(x, trained.hyper.norm, trained.norm_stats)[0]))
+
+
+def predict(trained: TrainedCell, x: np.ndarray) -> np.ndarray:
+    """(N, C) outputs for x (N, n, n, T): positions in metres (location) or logits."""
+    xn = _inputs(trained, x)
+    with torch.no_grad():
+        return torch.cat([trained.model(xn[i : i + EVAL_BATCH]).float() for i in range(0, len(xn), EVAL_BATCH)]).numpy()
+
+
+def embed(trained: TrainedCell, x: np.ndarray) -> np.ndarray:
+    """(N, D) penultimate-layer features for x (N, n, n, T): the input of the
+    last Linear layer the forward pass calls (the output head), e.g. the
+    1D CNN's 32 features after its hidden Linear-GELU."""
+    seen: list[torch.Tensor] = []
+    hooks = [m.register_forward_hook(lambda _m, inp, _out: seen.append(inp[0])) for m in trained.model.modules() if isinstance(m, nn.Linear)]
+    xn, outs = _inputs(trained, x), []
+    try:
+        with torch.no_grad():
+            for i in range(0, len(xn), EVAL_BATCH):
+                seen.clear()
+                trained.model(xn[i : i + EVAL_BATCH])
+                outs.append(seen[-1].float().flatten(1))
+    finally:
+        for h in hooks:
+            h.remove()
+    return torch.cat(outs).numpy()
+
+
+def labels(trained: TrainedCell, samples: pd.DataFrame) -> np.ndarray:
+    """The cell's targets for `samples` (a dataset's sample table): (N, 2)
+    metres, or (N,) indices into the cell's classes. ValueError for a class
+    the cell never learnt."""
+    task = trained.cell.task
+    if task == "location":
+        return samples[["x", "y"]].to_numpy(np.float32)
+    column = "class" if task == "shape" else "size"
+    classes = trained.classes if task == "shape" else list(SIZE_CLASSES)
+    unknown = sorted(set(samples[column]) - set(classes))
+    if unknown:
+        raise ValueError(f"{task} classes {unknown} were never learnt by the cell (it knows {classes})")
+    return samples[column].map({c: i for i, c in enumerate(classes)}).to_numpy(np.int64)
+
+
+def score(trained: TrainedCell, x: np.ndarray, samples: pd.DataFrame) -> dict:
+    """The cell's test metrics (`train.task_metrics`) on x (N, n, n, T) with
+    sample table `samples` (N rows)."""
+    if len(samples) != len(x):
+        raise ValueError(f"{len(x)} samples but {len(samples)} table rows")
+    return task_metrics(trained.cell.task, predict(trained, x), labels(trained, samples))
