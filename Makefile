@@ -17,8 +17,11 @@ export PATH := $(abspath $(BIN)):$(PATH)
 run: setup
 	snakemake --cores $(CORES) results/table5.csv
 
+# One pytest worker per core, a test file per worker (module fixtures such as
+# the tiny DAG run are built once): the end-to-end runs overlap with each
+# other and with the unit tests (tests/conftest.py collects them first).
 test: setup
-	python -m pytest
+	python -m pytest -n auto --dist loadfile
 
 setup: $(STAMP) debs
 

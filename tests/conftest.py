@@ -12,3 +12,15 @@ def demo_config() -> dict:
     """The default (demo) config as Snakemake sees it after validation."""
     with open(REPO / "config" / "config.yaml") as f:
         return yaml.safe_load(f)
+
+
+# The end-to-end files run whole DAGs for minutes; under `pytest -n` (the
+# Makefile's `make test`) each file runs on one worker in collection order, so
+# collecting them first, longest first, starts them together and lets the
+# short unit tests fill the gaps instead of queueing the longest run last.
+E2E_FIRST = ("test_workflow_tiny.py", "test_workflow_sources.py", "test_workflow_dags.py")
+
+
+def pytest_collection_modifyitems(items):
+    rank = {name: i for i, name in enumerate(E2E_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
