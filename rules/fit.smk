@@ -13,5 +13,5 @@ rule transforms:
     benchmark:
         "benchmarks/fit/transforms.tsv"
     shell:
-        "{DENALI} fit-transforms --features {input.features} --twins {input.twins} --config {params.config:q} --out {output} > {log} 2>&1"
+        "{DENALI} transforms --features {input.features} --twins {input.twins} --config {params.config:q} --out {output} > {log} 2>&1"
 

@@ -22,7 +22,7 @@ def _json(text: str):
         raise argparse.ArgumentTypeError(f"not valid JSON ({e}): {text[:80]!r}") from None
 
 
-def cmd_synth(args: argparse.Namespace) -> None:
+def cmd_rig(args: argparse.Namespace) -> None:
     from denali_pipe.capture_sets import parse_set_name
     from denali_pipe.objects import spec_from_dict
     from denali_pipe.rig.capture import synth_sets
@@ -222,7 +222,7 @@ def cmd_train(args: argparse.Namespace) -> None:
     log.info("wrote %s: test %s, %.1f s training (%.0f samples/s)", args.outdir, m.test, m.train_seconds, m.train_samples_per_second)
 
 
-def cmd_render(args: argparse.Namespace) -> None:
+def cmd_twin(args: argparse.Namespace) -> None:
     from denali_pipe.objects import spec_from_dict
     from denali_pipe.twin.render import render_twin
 
@@ -272,7 +272,7 @@ def _pairs_and_split(args: argparse.Namespace):
     return pairs, split_pairs(pairs.keys, args.config["seed"], args.config["fit"]["test_fraction"])
 
 
-def cmd_fit_transforms(args: argparse.Namespace) -> None:
+def cmd_transforms(args: argparse.Namespace) -> None:
     import time
 
     from denali_pipe.transforms import check_fit, fit_transforms, write_transforms
@@ -399,12 +399,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="denali", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="verb", required=True)
 
-    s = sub.add_parser("synth", help="synthesise capture sets of one object and size with the embedded capture rig")
+    s = sub.add_parser("rig", help="synthesise capture sets of one object and size with the embedded capture rig")
     s.add_argument("outs", nargs="+", help="<set>_NLOSdata folders, or <set>_short_NLOSdata.pkl with --format pickle")
     s.add_argument("--object", type=_json, default=None, help="the object's sheet row as JSON (omit for backgrounds)")
     s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "rig": {...}}')
     s.add_argument("--format", choices=["release", "pickle"], default="release", help="release folders or raw pickle streams")
-    s.set_defaults(func=cmd_synth)
+    s.set_defaults(func=cmd_rig)
 
     s = sub.add_parser("ingest", help="ingest one capture set (release folder or pickle stream) into Zarr")
     s.add_argument("source", help="<set>_NLOSdata folder or <set>_short_NLOSdata.pkl stream")
@@ -484,13 +484,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--outdir", required=True, help="output run folder: metrics.json, curves.csv, model.pt")
     s.set_defaults(func=cmd_train)
 
-    s = sub.add_parser("render", help="render one object and size's digital twin at every calibrated location")
+    s = sub.add_parser("twin", help="render one object and size's digital twin at every calibrated location")
     s.add_argument("scene", help="results/calibration/scene.json")
     s.add_argument("--object", type=_json, required=True, help="the object's sheet row as JSON")
     s.add_argument("--size", required=True, choices=["4inch", "8inch"], help="object size")
     s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "twin": {...}}')
     s.add_argument("--out", required=True, help="output results/twin/<object>_<size>.zarr")
-    s.set_defaults(func=cmd_render)
+    s.set_defaults(func=cmd_twin)
 
     s = sub.add_parser("render-benchmark", help="twin renderers' time per scene against error to a converged reference")
     s.add_argument("scene", help="results/calibration/scene.json")
@@ -509,12 +509,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="PNG path; the plotted data goes beside it as CSV")
     s.set_defaults(func=cmd_fig18)
 
-    s = sub.add_parser("fit-transforms", help="fit the sim-to-real transforms (scale, blur, noise) on the training captures' twins")
+    s = sub.add_parser("transforms", help="fit the sim-to-real transforms (scale, blur, noise) on the training captures' twins")
     s.add_argument("--features", nargs="+", required=True, help="3x3 light-on feature stores (results/features/<set>.zarr)")
     s.add_argument("--twins", nargs="+", required=True, help="their objects' twin stores (results/twin/<object>_<size>.zarr)")
     s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "fit": {...}}')
     s.add_argument("--out", required=True, help="output results/transforms.json")
-    s.set_defaults(func=cmd_fit_transforms)
+    s.set_defaults(func=cmd_transforms)
 
     s = sub.add_parser("fig9", help="Fig 9: localisation RMSE on real captures against real samples added to simulated training data")
     s.add_argument("--features", nargs="+", required=True, help="3x3 light-on feature stores (results/features/<set>.zarr)")
