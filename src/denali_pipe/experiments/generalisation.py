@@ -158,19 +158,23 @@ def _plot_scores(axes, scores: pd.DataFrame, variant_data: str) -> None:
         cnn = s[s["predictor"] == CNN].set_index("data").loc[list(order)]
         ax.bar(range(len(order)), cnn["value"], yerr=cnn["std"], capsize=4, color=["tab:blue", "tab:orange"], width=0.6, label=CNN)
         for i, v in enumerate(cnn["value"]):
-            ax.annotate(f"{v:.3g}", (i, v), textcoords="offset points", xytext=(8, 2), fontsize=7)
+            ax.annotate(f"{v:.3g}", (i, v), textcoords="offset points", xytext=(0, -10 if v > 0 else 2), ha="center", fontsize=7)
         if task == "location":
             base = s[s["predictor"] == MEAN_BASELINE].set_index("data").loc[list(order)]
             for i, v in enumerate(base["value"]):
                 ax.hlines(v, i - 0.4, i + 0.4, color="k", ls="--", lw=1.2, label=MEAN_BASELINE if i == 0 else None)
+            top = max((cnn["value"] + cnn["std"]).max(), base["value"].max())
         else:
             ax.axhline(s.loc[s["predictor"] == CHANCE, "value"].item(), color="k", ls="--", lw=1.2, label=f"{CHANCE} (1 / classes)")
-            ax.set_ylim(0, 1.05)
+            ax.set_yticks(np.linspace(0, 1, 6))
+            top = 1.0
+        ax.set_ylim(0, 1.3 * top)  # headroom for the legend above the bars
         ax.set_xticks(range(len(order)), [f"{d}\n({int(n)} samples)" for d, n in zip(order, cnn["n_samples"])], fontsize=7)
         ax.set_ylabel(METRIC_LABELS[metric], fontsize=8)
-        ax.set_title(f"{task} ({int(cnn['n_seeds'].min())} seeds, mean +- std)", fontsize=9)
+        seeds = int(cnn["n_seeds"].min())
+        ax.set_title(f"{task} ({seeds} seed{'s' if seeds != 1 else ''}, mean +- std)", fontsize=9)
         ax.grid(axis="y", alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right" if task != "location" else "upper left")
+        ax.legend(fontsize=7, loc="upper center", ncols=2)
 
 
 def _title(cells: list[CellMetrics]) -> str:
@@ -186,11 +190,9 @@ def fig10(cells: list[CellMetrics], evaluations: list[Evaluation], histograms: p
     scores = score_table(cells, evaluations, data)
     tasks = list(dict.fromkeys(scores["task"]))
     pairs = list(dict.fromkeys(histograms["pair"]))
-    ncols = max(len(tasks), len(pairs))
-    fig, axes = plt.subplots(2, ncols, figsize=(4.2 * ncols, 7.0), squeeze=False)
-    for ax in axes[0][len(pairs) :]:
-        ax.set_visible(False)
-    for ax, pair in zip(axes[0], pairs):
+    fig = plt.figure(figsize=(4.4 * len(tasks), 7.4), layout="constrained")
+    top, bottom = fig.subfigures(2, 1)
+    for ax, pair in zip(top.subplots(1, len(pairs), squeeze=False)[0], pairs):
         h = histograms[histograms["pair"] == pair]
         for data_kind, colour in ((RR, "tab:gray"), (NONRR, "tab:red")):
             c = h[h["data"] == data_kind]
@@ -204,11 +206,9 @@ def fig10(cells: list[CellMetrics], evaluations: list[Evaluation], histograms: p
         ax.set_ylabel(f"counts above background\n(mean +- std of {int(first['n_samples'])} repeats)", fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    for ax in axes[1][len(tasks) :]:
-        ax.set_visible(False)
-    _plot_scores(axes[1], scores, data)
-    fig.suptitle(f"Non-retroreflective objects. Top: their three-bounce return. Bottom: {_title(cells)} scored on them", fontsize=9)
-    fig.tight_layout()
+    top.suptitle("Non-retroreflective objects: their three-bounce return beside a retroreflective object's", fontsize=9)
+    _plot_scores(bottom.subplots(1, len(tasks), squeeze=False)[0], scores, data)
+    bottom.suptitle(f"{_title(cells)}, scored on the non-RR sets", fontsize=9)
     table = pd.concat([histograms.drop(columns="pair"), scores], ignore_index=True).reindex(columns=list(COLUMNS))
     save_figure(fig, out_png, table)
     return table
@@ -222,7 +222,7 @@ def fig11(cells: list[CellMetrics], evaluations: list[Evaluation], out_png: Path
     n = table["task"].nunique()
     fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), squeeze=False)
     _plot_scores(axes[0], table, data)
-    fig.suptitle(f"Italic 1, A and circle (8 in): {_title(cells)} scored on them", fontsize=9)
+    fig.suptitle(f"Italic variants of base objects (8 in): {_title(cells)} scored on them", fontsize=9)
     fig.tight_layout()
     save_figure(fig, out_png, table)
     return table

@@ -124,18 +124,19 @@ def write_tsne(table: pd.DataFrame, title: str, out_png: Path) -> None:
     seeds = table[table["row"] == "seed"]
     mean = table[table["row"] == "mean"].iloc[0]
     classes = mean["classes"].split(" ")
-    fig, axes = plt.subplots(1, len(seeds), figsize=(3.8 * len(seeds) + 0.6, 4.0), squeeze=False)
+    fig, axes = plt.subplots(1, len(seeds), figsize=(max(3.8 * len(seeds), 7.0), 4.6), squeeze=False)
     for ax, s in zip(axes[0], seeds.itertuples()):
         points = table[(table["row"] == "point") & (table["seed"] == s.seed)]
         for colour, cls in zip(("tab:blue", "tab:orange", "tab:green"), classes):
             p = points[points["class"] == cls]
             ax.scatter(p["tsne_1"], p["tsne_2"], s=14, color=colour, label=cls, alpha=0.8)
-        ax.set_title(f"seed {s.seed}: {NEIGHBOURS}-NN accuracy {s.knn_accuracy:.2f}, silhouette {s.silhouette:.2f}\n({int(s.n_samples)} unseen test samples)", fontsize=8)
+        ax.set_title(f"seed {int(s.seed)}: {NEIGHBOURS}-NN accuracy {s.knn_accuracy:.2f}, silhouette {s.silhouette:.2f}\n({int(s.n_samples)} unseen test samples)", fontsize=8)
         ax.set_xlabel("t-SNE 1 (arbitrary units)")
         ax.set_ylabel("t-SNE 2 (arbitrary units)")
         ax.legend(fontsize=7, title="class", title_fontsize=7)
+    n = int(mean["n_seeds"])
     fig.suptitle(
-        f"{title}\nseparability in the 32-D embedding, mean +- std over {int(mean['n_seeds'])} seeds: "
+        f"{title}\nseparability in the 32-D embedding, mean +- std over {n} seed{'s' if n != 1 else ''}:\n"
         f"{NEIGHBOURS}-NN accuracy {mean['knn_accuracy']:.2f} +- {mean['knn_accuracy_std']:.2f} (chance {mean['chance']:.2f}), "
         f"silhouette {mean['silhouette']:.2f} +- {mean['silhouette_std']:.2f} (0: overlapping)",
         fontsize=8,
