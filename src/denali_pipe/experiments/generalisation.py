@@ -20,9 +20,9 @@ size, lighting and gantry location.
 Each figure's CSV is one long table; `panel` says which part of the figure a
 row belongs to:
 - `score`: task, metric (`report.runs.HEADLINE`: RMSE in m, Top-1), data
-  (`BASE_TEST` or the variant's name), predictor (`CNN`, `MEAN_BASELINE`,
-  `CHANCE`), value (mean over seeds), std (ddof 1; 0 for one seed),
-  n_seeds, n_samples (per seed);
+  (`BASE_TEST`, the variant's sets, or `ANY_DATA` for chance), predictor
+  (`CNN`, `MEAN_BASELINE`, `CHANCE`), value (mean over seeds), std (ddof 1;
+  0 for one seed), n_seeds, n_samples (per seed);
 - `histogram` (Fig 10): object, data (`NONRR` or `RR`), size, light,
   location, bin (absolute, 3/128 m of optical path), value (mean counts over
   the repeats), std (over the repeats), n_samples (repeats).
@@ -42,6 +42,7 @@ from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.report.runs import HEADLINE
 
 BASE_TEST = "base test split"
+ANY_DATA = "any"  # the `data` of chance, which does not depend on the samples
 CNN, MEAN_BASELINE, CHANCE = "1D CNN", "predict the training mean", "chance"
 NONRR, RR = "non-retroreflective", "retroreflective"
 VARIANT_DATA = {"fig10": "non-RR sets", "fig11": "italic sets"}
@@ -92,7 +93,7 @@ def score_table(cells: list[CellMetrics], evaluations: list[Evaluation], variant
                 (variant_data, MEAN_BASELINE, [e.baseline[metric] for e in evals], evals[0].n_samples),
             ]
         else:
-            parts.append(("", CHANCE, [1.0 / mine[0].n_classes], 0))
+            parts.append((ANY_DATA, CHANCE, [1.0 / mine[0].n_classes], 0))
         for data, predictor, values, n in parts:
             mean, std = _stats(values)
             rows.append({"panel": "score", "task": task, "metric": metric, "data": data, "predictor": predictor, "value": mean, "std": std,
