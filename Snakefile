@@ -15,6 +15,9 @@ include: "rules/preprocess.smk"
 include: "rules/train.smk"
 include: "rules/report.smk"
 include: "rules/fit.smk"
+include: "rules/fig9.smk"
+include: "rules/generalisation.smk"
+include: "rules/tsne.smk"
 
 
 rule all:
@@ -37,4 +40,8 @@ rule all:
         "results/fig18.png",
         "results/transforms.json",
         "results/fig9.png",
+        "results/fig10.png",
+        "results/fig11.png",
+        "results/fig13.png",
+        "results/fig14.png",
     default_target: True

@@ -152,18 +152,19 @@ TRAIN = config["train"]
 RUN_DIR = "results/runs/{protocol}/{res}/{split}/{model}_{task}/seed{seed}"
 
 
-def run_dirs(models, tasks, splits):
-    """Cells of the configured protocol, resolution and seeds; ill-posed
-    (split, task) pairs are never trained (tables report them as n/a)."""
+def run_dirs(models, tasks, splits, res=TRAIN["resolution"]):
+    """Cells of the configured protocol and seeds at `res` (default: the
+    tables' resolution); ill-posed (split, task) pairs are never trained
+    (tables report them as n/a)."""
     return [
-        RUN_DIR.format(protocol=TRAIN["protocol"], res=TRAIN["resolution"], split=sp, model=m, task=t, seed=seed)
+        RUN_DIR.format(protocol=TRAIN["protocol"], res=res, split=sp, model=m, task=t, seed=seed)
         for m in models for t in tasks for sp in splits for seed in TRAIN["seeds"]
         if not is_ill_posed(sp, t)
     ]  # fmt: skip
 
 
-def run_files(models, tasks, splits, name="metrics.json"):
-    return [f"{d}/{name}" for d in run_dirs(models, tasks, splits)]
+def run_files(models, tasks, splits, name="metrics.json", res=TRAIN["resolution"]):
+    return [f"{d}/{name}" for d in run_dirs(models, tasks, splits, res)]
 
 
 def cell_arg(wildcards):
@@ -208,8 +209,5 @@ def fit_inputs(wildcards):
     }
 
 
-# The fit's and Fig 9's settings: one JSON each, so that a Fig 9 setting reruns no fit.
+# The fit's settings alone, so that a Fig 9 setting (fig9.smk) reruns no fit.
 FIT_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": {k: FIT[k] for k in ("test_fraction", "bootstrap")}}, sort_keys=True)
-FIG9_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": FIT}, sort_keys=True)
-# The localiser's optimiser settings are the benchmark's 1D CNN location ones; epochs are Fig 9's own.
-FIG9_HYPER = json.dumps({**TRAIN["hyper"]["cnn1d"]["location"], "epochs": FIT["fig9"]["epochs"]}, sort_keys=True)

@@ -44,7 +44,7 @@ rule speed_vs_accuracy:
     log:
         "logs/report/speed_vs_accuracy.log",
     shell:
-        "{DENALI} report speed-accuracy {input} --out {output.png} > {log} 2>&1"
+        "{DENALI} report speed-vs-accuracy {input} --out {output.png} > {log} 2>&1"
 
 
 rule training_curves:

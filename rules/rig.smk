@@ -23,7 +23,7 @@ if config["source"] == "synthetic":
         benchmark:
             "benchmarks/rig/{object}_{size}.tsv"
         shell:
-            "{DENALI} synth {output} {params.object} --config {params.config:q} > {log} 2>&1"
+            "{DENALI} rig {output} {params.object} --config {params.config:q} > {log} 2>&1"
 
 
 rule rig_examples:

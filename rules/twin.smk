@@ -35,7 +35,7 @@ rule twin:
     benchmark:
         "benchmarks/twin/{object}_{size}.tsv"
     shell:
-        "{DENALI} render {input.scene} {params.object} --size {wildcards.size} --config {params.config:q} --out {output} > {log} 2>&1"
+        "{DENALI} twin {input.scene} {params.object} --size {wildcards.size} --config {params.config:q} --out {output} > {log} 2>&1"
 
 
 rule render_benchmark:

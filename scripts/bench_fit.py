@@ -8,7 +8,7 @@
 
 Default: times, on the 3x3 light-on base-object features under
 <root>/results/features and their twins under <root>/results/twin, what
-`denali fit-transforms` does: reading and pairing the stores with the split,
+`denali transforms` does: reading and pairing the stores with the split,
 the fit (scale, blur, noise) and its check (the bootstrap of `fit.bootstrap`);
 prints the fitted parameters, the check and the peak resident memory.
 The issue's target: the whole fit in at most 2 minutes on 2 cores.

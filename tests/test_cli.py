@@ -1,4 +1,4 @@
-"""`denali synth` through `denali_pipe.cli.main` (in-process)."""
+"""`denali rig` through `denali_pipe.cli.main` (in-process)."""
 
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ def errors(caplog) -> list[str]:
 
 def test_synth_writes_sets(tmp_path, catalogue, job_config, log):
     outs = [tmp_path / f"A_4inch_{res}_lightoff_NLOSdata" for res in ("3x3", "8x8")]
-    rc = main(["synth", *map(str, outs), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)])
+    rc = main(["rig", *map(str, outs), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)])
     assert rc == 0
     assert errors(log) == []
     assert any("wrote" in r.getMessage() for r in log.records)
@@ -68,7 +68,7 @@ def test_synth_writes_sets(tmp_path, catalogue, job_config, log):
 def test_synth_matches_library_call(tmp_path, catalogue, job_config, log):
     cli_out = tmp_path / "cli" / "A_4inch_3x3_lighton_NLOSdata"
     lib_out = tmp_path / "lib" / "A_4inch_3x3_lighton_NLOSdata"
-    assert main(["synth", str(cli_out), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)]) == 0
+    assert main(["rig", str(cli_out), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)]) == 0
     synth_sets([parse_set_name(lib_out.name)], catalogue["A"], job_config, [lib_out], "release")
     for p in sorted(lib_out.rglob("*")):
         if p.is_file():
@@ -77,7 +77,7 @@ def test_synth_matches_library_call(tmp_path, catalogue, job_config, log):
 
 def test_synth_background_and_pickle(tmp_path, job_config, log):
     out = tmp_path / "NOOBJECTMOUNT_8inch_3x3_lighton_short_NLOSdata.pkl"
-    assert main(["synth", str(out), "--config", json.dumps(job_config), "--format", "pickle"]) == 0
+    assert main(["rig", str(out), "--config", json.dumps(job_config), "--format", "pickle"]) == 0
     assert out.is_file()
     assert (tmp_path / "NOOBJECTMOUNT_8inch_3x3_lighton_rig_truth.json").is_file()
     assert errors(log) == []
@@ -94,7 +94,7 @@ def test_synth_background_and_pickle(tmp_path, job_config, log):
 )
 def test_object_record_must_match_set(tmp_path, catalogue, job_config, log, set_name, record):
     out = tmp_path / f"{set_name}_NLOSdata"
-    args = ["synth", str(out), "--config", json.dumps(job_config)]
+    args = ["rig", str(out), "--config", json.dumps(job_config)]
     if record is not None:
         args += obj_arg(catalogue, record)
     assert main(args) == 1
@@ -105,7 +105,7 @@ def test_object_record_must_match_set(tmp_path, catalogue, job_config, log, set_
 
 def test_object_record_must_match_every_set(tmp_path, catalogue, job_config, log):
     outs = [tmp_path / "A_8inch_3x3_lighton_NLOSdata", tmp_path / "B_8inch_3x3_lighton_NLOSdata"]
-    assert main(["synth", *map(str, outs), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)]) == 1
+    assert main(["rig", *map(str, outs), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)]) == 1
     (msg,) = errors(log)
     assert "B_8inch_3x3_lighton" in msg
     assert list(tmp_path.iterdir()) == []
@@ -114,7 +114,7 @@ def test_object_record_must_match_every_set(tmp_path, catalogue, job_config, log
 def test_object_record_without_the_size(tmp_path, catalogue, job_config, log):
     # the italic plates exist at 8 in only
     out = tmp_path / "generalization1italic_4inch_3x3_lighton_NLOSdata"
-    assert main(["synth", str(out), *obj_arg(catalogue, "generalization1italic"), "--config", json.dumps(job_config)]) == 1
+    assert main(["rig", str(out), *obj_arg(catalogue, "generalization1italic"), "--config", json.dumps(job_config)]) == 1
     (msg,) = errors(log)
     assert "4inch" in msg
     assert list(tmp_path.iterdir()) == []
@@ -123,7 +123,7 @@ def test_object_record_without_the_size(tmp_path, catalogue, job_config, log):
 @pytest.mark.parametrize("name", ["A_4inch_3x3_lightsout_NLOSdata", "capture_042", "A_6inch_3x3_lighton_NLOSdata"])
 def test_unparsable_output_name(tmp_path, catalogue, job_config, log, name):
     out = tmp_path / name
-    assert main(["synth", str(out), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)]) == 1
+    assert main(["rig", str(out), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)]) == 1
     (msg,) = errors(log)
     assert name in msg and "does not parse" in msg
     assert list(tmp_path.iterdir()) == []
@@ -131,7 +131,7 @@ def test_unparsable_output_name(tmp_path, catalogue, job_config, log, name):
 
 @pytest.mark.parametrize("option", ["--config", "--object"])
 def test_invalid_json_is_an_argument_error(tmp_path, job_config, capsys, option):
-    args = ["synth", str(tmp_path / "A_4inch_3x3_lighton_NLOSdata"), "--config", json.dumps(job_config)]
+    args = ["rig", str(tmp_path / "A_4inch_3x3_lighton_NLOSdata"), "--config", json.dumps(job_config)]
     args += [option, "{seed: 1,"]
     with pytest.raises(SystemExit) as e:
         main(args)
@@ -143,6 +143,6 @@ def test_invalid_json_is_an_argument_error(tmp_path, job_config, capsys, option)
 
 def test_unknown_format_is_an_argument_error(tmp_path, job_config, capsys):
     with pytest.raises(SystemExit) as e:
-        main(["synth", str(tmp_path / "NOOBJECT_8inch_3x3_lighton_NLOSdata"), "--config", json.dumps(job_config), "--format", "zarr"])
+        main(["rig", str(tmp_path / "NOOBJECT_8inch_3x3_lighton_NLOSdata"), "--config", json.dumps(job_config), "--format", "zarr"])
     assert e.value.code == 2
     assert "--format" in capsys.readouterr().err

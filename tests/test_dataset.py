@@ -77,5 +77,15 @@ def test_dataset_refuses_mismatches(tmp_path, catalogue):
     v = _write(tmp_path, "generalization1white_4inch_3x3_lighton")
     with pytest.raises(ValueError, match="not a base object"):
         build_dataset([v], catalogue, labels)
+    with pytest.raises(ValueError, match="'A' is not a nonrr object"):
+        build_dataset([a, v], catalogue, labels, variant="nonrr")
+
+
+def test_a_variant_dataset_holds_its_variant_with_the_base_class(tmp_path, catalogue):
+    labels = {0: (1.0, 0.2), 5: (1.1, 0.3), 9: (1.2, 0.4)}
+    paths = [_write(tmp_path, n) for n in ("generalization1white_4inch_3x3_lighton", "generalization1cardstock_8inch_3x3_lightoff")]
+    x, samples = build_dataset(paths, catalogue, labels, variant="nonrr")
+    assert x.shape == (18, 3, 3, 51) and set(samples["class"]) == {"1"}
+    assert sorted(set(samples["object"])) == ["generalization1cardstock", "generalization1white"]
     with pytest.raises(ValueError, match="lacks the columns"):
         location_labels(pd.DataFrame({"location": [0], "x": [1.0]}))

@@ -1,13 +1,13 @@
 """A saved cell, loaded back: it scores its own test split as training did,
 embeds, and refuses what it cannot score."""
 
-import json
-
 import numpy as np
 import pytest
 import torch
 
-from denali_pipe.evaluate import embed, labels, load_cell, predict, score
+from denali_pipe.cli import main
+from denali_pipe.dataset import write_dataset
+from denali_pipe.evaluate import Evaluation, baseline_score, embed, labels, load_cell, predict, score
 from denali_pipe.train import Hyper, partition, run_cell, targets
 
 from test_train import _cell, data  # noqa: F401 (the fixture)
@@ -17,7 +17,8 @@ HP = Hyper(lr=3e-3, epochs=2, batch_size=32, norm="log_z")
 
 def save(tmp_path, result):
     """As `denali train` writes a run directory."""
-    (tmp_path / "metrics.json").write_text(json.dumps(result.metrics))
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    (tmp_path / "metrics.json").write_text(result.metrics.to_json())
     torch.save(result.state, tmp_path / "model.pt")
     return tmp_path
 
@@ -35,7 +36,8 @@ def test_a_loaded_cell_scores_its_test_split_as_training_did(tmp_path, data, mod
     test = samples.iloc[split.test]
     assert np.array_equal(labels(trained, test), y[split.test])
     got = score(trained, x[split.test], test)
-    assert got == pytest.approx(result.metrics["test"], rel=1e-5, abs=1e-6)
+    assert got == pytest.approx(result.metrics.test, rel=1e-5, abs=1e-6)
+    assert baseline_score(trained, test) == pytest.approx(result.metrics.baseline, rel=1e-12)
 
 
 def test_embed_is_the_heads_input(tmp_path, data):  # noqa: F811
@@ -58,3 +60,30 @@ def test_refuses_what_it_cannot_score(tmp_path, data):  # noqa: F811
         predict(trained, np.zeros((2, 8, 8, x.shape[-1]), np.float32))
     with pytest.raises(ValueError, match="model.pt: not a training cell's saved model"):
         load_cell(tmp_path / "elsewhere")
+
+
+def test_denali_evaluate_writes_the_cell_and_its_baseline_on_another_dataset(tmp_path, data):  # noqa: F811
+    x, samples = data
+    run = save(tmp_path / "run", run_cell(x, samples, _cell(task="location"), HP, validation_fraction=0.2))
+    # "another dataset": the 8 in lights-off samples, shifted 5 cm in x
+    other = samples[(samples["size"] == "8inch") & (samples["light"] == "lightoff")]
+    moved = other.assign(x=other["x"] + 0.05).reset_index(drop=True)
+    write_dataset(x[other.index], moved, tmp_path / "other.zarr", tmp_path / "other.parquet", 70)
+    out = tmp_path / "evaluation.json"
+    assert main(["evaluate", str(run), str(tmp_path / "other.zarr"), "--table", str(tmp_path / "other.parquet"), "--out", str(out)]) == 0
+    e = Evaluation.read(out)
+    trained = load_cell(run)
+    assert e.cell == trained.cell and e.n_samples == len(moved) and e.n_classes == 2
+    assert e.metrics == pytest.approx(score(trained, x[other.index], moved))
+    mean = np.array(trained.baseline_output)
+    assert e.baseline["rmse"] == pytest.approx(np.sqrt(np.mean((moved[["x", "y"]].to_numpy() - mean) ** 2)))
+    with pytest.raises(ValueError, match="not a cell's evaluation"):
+        Evaluation.read(run / "metrics.json")
+
+
+def test_a_cell_saved_without_its_baselines_output_asks_to_be_retrained(tmp_path, data):  # noqa: F811
+    x, samples = data
+    result = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2)
+    del result.state["baseline_output"]
+    with pytest.raises(ValueError, match="retrain the cell"):
+        load_cell(save(tmp_path, result))

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from denali_pipe import geometry as geo
-from denali_pipe.fig9 import MEAN_BASELINE, bound_to_workspace, real_samples, run_fig9
+from denali_pipe.experiments.fig9 import MEAN_BASELINE, bound_to_workspace, real_samples, run_fig9
 from denali_pipe.report.fig9 import write_fig9
 from denali_pipe.train import Hyper
 from denali_pipe.transforms import FIDELITIES, KERNEL_BINS, Pairs, Transforms, split_pairs
@@ -88,7 +88,7 @@ def test_run_fig9_bounds_every_model_to_its_training_labels_box(data, monkeypatc
     answered the box's corner: the training captures' positions (twins and
     real repeats alike) bound every model."""
     pairs, xy = data
-    monkeypatch.setattr("denali_pipe.fig9.predict", lambda model, stats, x, norm: np.full((len(x), 2), 1e6))
+    monkeypatch.setattr("denali_pipe.experiments.fig9.predict", lambda model, stats, x, norm: np.full((len(x), 2), 1e6))
     one_seed = {**SETTINGS, "fig9": {**SETTINGS["fig9"], "seeds": [1]}}
     runs = run_fig9(pairs, xy, TRANSFORMS, one_seed, HP, split_seed=42)
     split = split_pairs(pairs.keys, 42, SETTINGS["test_fraction"])

@@ -1,14 +1,13 @@
 """Training tables and figures from cells' metrics.json and curves.csv."""
 
-import json
-
 import pandas as pd
 import pytest
 
-from denali_pipe.cells import MODELS, SPLITS, TASKS, is_ill_posed
-from denali_pipe.report.curves import write_curves_figure
+from denali_pipe.cell_metrics import CellMetrics
+from denali_pipe.cells import MODELS, SPLITS, TASKS, Cell, is_ill_posed
+from denali_pipe.report.training_curves import write_training_curves
 from denali_pipe.report.paper import TABLE5, TABLE10
-from denali_pipe.report.speed_accuracy import pareto, write_speed_accuracy
+from denali_pipe.report.speed_vs_accuracy import pareto, write_speed_vs_accuracy
 from denali_pipe.report.table2 import write_table2
 from denali_pipe.report.table5 import write_table5
 from denali_pipe.report.table10 import write_table10
@@ -21,15 +20,15 @@ def _write_cell(root, model, task, split, seed, protocol="clean", score=0.0):
     d = root / protocol / "3x3" / split / f"{model}_{task}" / f"seed{seed}"
     d.mkdir(parents=True)
     test = {k: v + score for k, v in (REG if task == "location" else CLS).items()}
-    m = {
-        "cell": {"model": model, "task": task, "split": split, "resolution": "3x3", "protocol": protocol, "seed": seed},
-        "hyper": {"lr": 1e-3, "epochs": 10, "batch_size": 64, "norm": "raw"},
-        "selected_on": "validation", "n_train": 700, "n_validation": 140, "n_test": 300, "n_classes": 30, "params": 82340,
-        "best_epoch": 7, "test": test, "baseline": {k: v / 2 for k, v in test.items()},
-        "train_seconds": 36.0 * (1 + MODELS.index(model) if model in MODELS else 0.1), "inference_seconds": 0.36,
-        "train_samples_per_second": 700.0, "device": "cpu",
-    }  # fmt: skip
-    (d / "metrics.json").write_text(json.dumps(m))
+    m = CellMetrics(
+        cell=Cell(model=model, task=task, split=split, resolution="3x3", protocol=protocol, seed=seed),
+        hyper={"lr": 1e-3, "epochs": 10, "batch_size": 64, "norm": "raw"},
+        selected_on="validation", n_train=700, n_validation=140, n_test=300, n_classes=30, input_shape=(3, 3, 57), params=82340,
+        best_epoch=7, test=test, baseline={k: v / 2 for k, v in test.items()},
+        train_seconds=36.0 * (1 + MODELS.index(model) if model in MODELS else 0.1), inference_seconds=0.36,
+        train_samples_per_second=700.0, inference_samples_per_second=833.0, device="cpu",
+    )  # fmt: skip
+    (d / "metrics.json").write_text(m.to_json())
     curves = [(e, part, k, v + 0.01 * e) for e in range(1, 11) for part in ("train", "validation") for k, v in test.items()]
     curves.append((7, "test", list(test)[0], 0.1))
     pd.DataFrame(curves, columns=["epoch", "part", "metric", "value"]).to_csv(d / "curves.csv", index=False)
@@ -78,7 +77,7 @@ def test_table2_table10_speed_accuracy_and_curves(tmp_path):
     assert t10.loc[("cnn3d", "shape"), "paper_params"] == TABLE10[("cnn3d", "shape")]["params"]
     assert t10.loc[("cnn1d", "size"), "train_hours"] == pytest.approx(72 / 3600)
 
-    write_speed_accuracy([p / "metrics.json" for p in paths], tmp_path / "sva.png")
+    write_speed_vs_accuracy([p / "metrics.json" for p in paths], tmp_path / "sva.png")
     sva = pd.read_csv(tmp_path / "sva.csv")
     assert (tmp_path / "sva.png").stat().st_size > 10_000
     assert set(sva["model"]) == {*MODELS, "linear"} and len(sva) == 15
@@ -86,7 +85,7 @@ def test_table2_table10_speed_accuracy_and_curves(tmp_path):
     assert sva[sva["pareto"]]["model"].unique().tolist() == ["linear"]
 
     curves = [p / "curves.csv" for p in paths if "cnn1d_location" in str(p)]
-    write_curves_figure(curves, "location", "1D CNN", tmp_path / "fig16.png")
+    write_training_curves(curves, "location", "1D CNN", tmp_path / "fig16.png")
     assert (tmp_path / "fig16.png").stat().st_size > 10_000
     assert set(pd.read_csv(tmp_path / "fig16.csv")["part"]) == {"train", "validation", "test"}
 

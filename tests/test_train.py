@@ -1,4 +1,7 @@
-"""Training cells on small synthetic features: protocols, determinism, outputs."""
+"""Training cells on small synthetic features: protocols, determinism,
+outputs; the training loop every network goes through."""
+
+import logging
 
 import numpy as np
 import pandas as pd
@@ -7,7 +10,9 @@ import torch
 
 from denali_pipe.classical import run_linear
 from denali_pipe.preprocess import normalise
-from denali_pipe.train import Cell, Hyper, partition, run_cell, targets
+from denali_pipe.cells import Cell
+from denali_pipe.models import build_model
+from denali_pipe.train import Hyper, fit, loss_for, partition, run_cell, targets
 
 CLASSES = ("A", "B", "circle")
 N_LOC, REPEATS, BINS = 8, 3, 24
@@ -56,22 +61,22 @@ def test_clean_protocol_selects_on_validation_and_tests_once(data):
     x, samples = data
     res = run_cell(x, samples, _cell(), HP, validation_fraction=0.2)
     m, c = res.metrics, res.curves
-    assert m["selected_on"] == "validation" and m["n_validation"] > 0
-    assert m["n_train"] + m["n_validation"] + m["n_test"] == len(samples)
+    assert m.selected_on == "validation" and m.n_validation > 0
+    assert m.n_train + m.n_validation + m.n_test == len(samples)
     assert set(c["part"]) == {"train", "validation", "test"}
-    assert c[c["part"] == "test"]["epoch"].unique().tolist() == [m["best_epoch"]]
+    assert c[c["part"] == "test"]["epoch"].unique().tolist() == [m.best_epoch]
     assert c[c["part"] == "validation"]["epoch"].nunique() == HP.epochs
-    assert {"rmse", "mae"} <= set(m["test"]) and m["params"] == 82340
-    assert m["train_samples_per_second"] > 0 and m["inference_seconds"] > 0
+    assert {"rmse", "mae"} <= set(m.test) and m.params == 82340
+    assert m.train_samples_per_second > 0 and m.inference_seconds > 0
 
 
 def test_paper_protocol_selects_on_test(data):
     x, samples = data
     res = run_cell(x, samples, _cell(task="shape", protocol="paper"), HP, validation_fraction=0.2)
     m, c = res.metrics, res.curves
-    assert m["selected_on"] == "test" and m["n_validation"] == 0
+    assert m.selected_on == "test" and m.n_validation == 0
     best = c[(c["part"] == "test") & (c["metric"] == "top1")].set_index("epoch")["value"]
-    assert m["test"]["top1"] == pytest.approx(best.max()) and m["best_epoch"] == best.idxmax()
+    assert m.test["top1"] == pytest.approx(best.max()) and m.best_epoch == best.idxmax()
 
 
 def test_clean_normalisation_statistics_come_from_the_training_part_only(data):
@@ -89,22 +94,56 @@ def test_cells_are_deterministic_and_learn(data):
     x, samples = data
     a = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2)
     b = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2)
-    assert a.metrics["test"] == b.metrics["test"]
+    assert a.metrics.test == b.metrics.test
     assert all(torch.equal(a.state["model"][k], b.state["model"][k]) for k in a.state["model"])
-    assert a.metrics["test"]["top1"] > 0.8 > a.metrics["baseline"]["top1"]
+    assert a.metrics.test["top1"] > 0.8 > a.metrics.baseline["top1"]
 
 
 def test_linear_cell_beats_the_baseline(data):
     x, samples = data
     res = run_linear(x, samples, _cell(model="linear", task="location"), validation_fraction=0.2)
     m = res.metrics
-    assert m["test"]["rmse"] < 0.5 * m["baseline"]["rmse"]
-    assert m["selected_on"] == "validation" and m["selected_regularisation"] in m["hyper"]["regularisation"]
+    assert m.test["rmse"] < 0.5 * m.baseline["rmse"]
+    assert m.selected_on == "validation" and m.selected_regularisation in m.hyper["regularisation"]
     res = run_linear(x, samples, _cell(model="linear", task="shape", split="size_held_out"), validation_fraction=0.2)
-    assert res.metrics["test"]["top1"] > 1 / len(CLASSES)
+    assert res.metrics.test["top1"] > 1 / len(CLASSES)
 
 
 def test_unknown_protocol_is_refused(data):
     x, samples = data
     with pytest.raises(ValueError, match="unknown protocol"):
         run_cell(x, samples, _cell(protocol="sloppy"), HP, validation_fraction=0.2)
+
+
+@pytest.mark.parametrize("model", ["mlp", "cnn1d", "cnn3d", "transformer"])
+def test_fit_trains_every_batch_down_to_a_last_one_of_one_sample(data, model):
+    x, samples = data
+    hp = Hyper(lr=1e-3, epochs=1, batch_size=8, norm="raw")
+    torch.manual_seed(0)
+    net = build_model(model, "shape", n=3, bins=BINS, n_classes=len(CLASSES))
+    y = torch.from_numpy(np.array(targets(samples, "shape")[0][:9]))  # pandas hands out read-only views
+    seen = []
+    fitted = fit(net, torch.from_numpy(x[:9]), y, hp, 0, loss_for("shape"), lambda e, rows, out: seen.append(len(rows)) or 0.0)
+    assert fitted.samples_seen == 9 and seen == [9]
+
+
+def test_fit_keeps_the_best_scoring_epoch_or_the_last(data, caplog):
+    x, samples = data
+    xt, yt = torch.from_numpy(x[:100]), torch.from_numpy(np.array(targets(samples, "location")[0][:100]))
+    hp = Hyper(lr=1e-3, epochs=3, batch_size=64, norm="raw")
+    states = []
+
+    def score(epoch, rows, out):
+        states.append({k: v.clone() for k, v in net.state_dict().items()})
+        return {1: 0.0, 2: 5.0, 3: 1.0}[epoch]
+
+    net = build_model("cnn1d", "location", n=3, bins=BINS, n_classes=2)
+    with caplog.at_level(logging.INFO, logger="denali_pipe.train"):
+        fitted = fit(net, xt, yt, hp, 0, loss_for("location"), score, name="probe")
+    assert fitted.best_epoch == 2 and fitted.epochs_run == 3 and fitted.samples_seen == 3 * len(xt)
+    assert all(torch.equal(net.state_dict()[k], states[1][k]) for k in states[1])
+    # stderr is no terminal under pytest: one log line per epoch, no bar
+    assert [r.getMessage().split(",")[0] for r in caplog.records] == [f"probe: epoch {e}/3" for e in (1, 2, 3)]
+    net = build_model("cnn1d", "location", n=3, bins=BINS, n_classes=2)
+    assert fit(net, xt, yt, hp, 0, loss_for("location")).best_epoch == 3
+

@@ -145,7 +145,7 @@ def test_render_job_writes_the_twin_store(scene_json, catalogue, tmp_path):
 def test_render_verb(scene_json, catalogue, tmp_path, caplog):
     out = tmp_path / "A_4inch.zarr"
     cfg = {"seed": 1, "twin": {**SETTINGS, "renderer": "mitransient", "mitransient": {**SETTINGS["mitransient"], "spp": 200}}}
-    args = ["render", str(scene_json), "--object", json.dumps(catalogue["A"].to_dict()), "--size", "4inch", "--config", json.dumps(cfg), "--out", str(out)]
+    args = ["twin", str(scene_json), "--object", json.dumps(catalogue["A"].to_dict()), "--size", "4inch", "--config", json.dumps(cfg), "--out", str(out)]
     assert main(args) == 0
     assert read_twin(out).attrs["renderer"] == "mitransient"
     args[args.index("--config") + 1] = json.dumps({"seed": 1})

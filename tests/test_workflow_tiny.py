@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from denali_pipe.capture_sets import expected_sets
-from denali_pipe.fig9 import MEAN_BASELINE
+from denali_pipe.experiments.fig9 import MEAN_BASELINE
 from denali_pipe.geometry import select_locations
 from denali_pipe.io.store import open_set
 from denali_pipe.objects import load_catalogue
@@ -101,12 +101,14 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     preset.write_text(preset.read_text().replace("generalization1white]", "generalization1white, newplus]"))
     out = snakemake(wd, "-n", *TINY).stdout
     jobs = job_counts(out)
-    # the new object: 2 sizes x 2 resolutions x 2 lightings; twins per object x size
-    own = {"rig": 2, "ingest": 8, "poses": 8, "preprocess": 4, "twin": 2}
-    aggregates = {"index": 1, "table4": 1, "table6": 1, "detections": 1, "dataset": 1, "render_benchmark": 1, "fig18": 1, "transforms": 1, "fig9": 1, "all": 1}
-    # every training cell reads the dataset; tiny: 1 seed, 13 Table 5 cells + 9 more Table 2 cells + 3 linear
-    training = {"train": 25, "table5": 1, "table2": 1, "table10": 1, "training_curves": 2, "speed_vs_accuracy": 1}
-    expected = {**own, **aggregates, **training}
+    # the new object: 2 sizes x 2 resolutions x 2 lightings (preprocessed at both: Fig 14 trains at 8x8); twins per object x size
+    own = {"rig": 2, "ingest": 8, "poses": 8, "preprocess": 8, "twin": 2}
+    aggregates = {"index": 1, "table4": 1, "table6": 1, "detections": 1, "dataset": 2, "render_benchmark": 1, "fig18": 1, "transforms": 1, "fig9": 1, "all": 1}
+    # every training cell reads its dataset; tiny: 1 seed, 13 Table 5 cells + 9 more Table 2 cells + 3 linear + Fig 14's 8x8 shape cell;
+    # the variant datasets stay, but the retrained cells are scored on them again (5 evaluations)
+    training = {"train": 26, "table5": 1, "table2": 1, "table10": 1, "training_curves": 2, "speed_vs_accuracy": 1}
+    experiments = {"evaluate": 5, "fig10": 1, "fig11": 1, "tsne": 2}
+    expected = {**own, **aggregates, **training, **experiments}
     assert jobs == {**expected, "total": sum(expected.values())}
     rig_jobs = re.findall(r"rule rig:\n    output: data/raw/(\w+?)_(4inch|8inch)_", out)
     assert sorted(rig_jobs) == [("newplus", "4inch"), ("newplus", "8inch")]
@@ -283,12 +285,53 @@ def test_transforms_and_fig9(tiny_run):
     assert (tiny_run / "results/fig9.png").stat().st_size > 10_000
 
 
+# --- experiments: Figs 10, 11 (variant sets), 13, 14 (t-SNE) ------------------------
+
+
+def test_variant_datasets_and_the_cells_scored_on_them(tiny_run):
+    for variant, objects in (("nonrr", {"generalization1white"}), ("italic", {"generalization1italic"})):
+        samples = pd.read_parquet(tiny_run / f"results/datasets/{variant}_3x3.parquet")
+        assert set(samples["object"]) == objects and set(samples["class"]) == {"1"}
+        for task in ("location", "shape", "size") if variant == "nonrr" else ("location", "shape"):
+            e = json.loads((tiny_run / f"results/evaluations/{variant}_3x3/clean/3x3/random/cnn1d_{task}/seed42.json").read_text())
+            assert e["n_samples"] == len(samples) and e["cell"]["task"] == task and e["metrics"] and e["baseline"]
+
+
+def test_fig10_and_fig11(tiny_run):
+    fig10 = pd.read_csv(tiny_run / "results/fig10.csv")
+    scores = fig10[fig10["panel"] == "score"].set_index(["task", "data", "predictor"])
+    assert set(scores.index.get_level_values("task")) == {"location", "shape", "size"}
+    assert scores.loc[("shape", "any", "chance"), "value"] == pytest.approx(1 / 3)  # tiny's three base classes
+    # 3 epochs: the path, not the numbers; every score a finite value in its metric's range
+    assert 0 < scores.loc[("location", "non-RR sets", "1D CNN"), "value"] < 2.0
+    assert 0 <= scores.loc[("size", "non-RR sets", "1D CNN"), "value"] <= 1 and (scores["n_seeds"].dropna() <= 1).all()
+    hist = fig10[fig10["panel"] == "histogram"]
+    assert set(hist["object"]) == {"generalization1white", "1"} and set(hist["size"]) == {"8inch"} and set(hist["light"]) == {"lightoff"}
+    fig11 = pd.read_csv(tiny_run / "results/fig11.csv")
+    assert set(fig11["task"]) == {"location", "shape"} and set(fig11["data"].dropna()) >= {"base test split", "italic sets"}
+    for fig in ("fig10", "fig11"):
+        assert (tiny_run / f"results/{fig}.png").stat().st_size > 10_000
+
+
+def test_tsne_figures_at_both_resolutions(tiny_run):
+    for fig, res in (("fig13", "3x3"), ("fig14", "8x8")):
+        table = pd.read_csv(tiny_run / f"results/{fig}.csv")
+        mean = table[table["row"] == "mean"].iloc[0]
+        assert set(table["resolution"]) == {res} and mean["classes"] == "1 A circle" and mean["n_seeds"] == 1
+        assert 0 <= mean["knn_accuracy"] <= 1 and -1 <= mean["silhouette"] <= 1
+        assert (table["row"] == "point").sum() == table.loc[table["row"] == "seed", "n_samples"].sum() > 0
+        assert (tiny_run / f"results/{fig}.png").stat().st_size > 10_000
+    m = json.loads((tiny_run / "results/runs/clean/8x8/random/cnn1d_shape/seed42/metrics.json").read_text())
+    assert m["input_shape"][:2] == [8, 8]
+
+
 # --- the HTML report -------------------------------------------------------------
 
 
 REPORTED = (
     "rig_examples.png", "rig_vs_real.png", "table4.csv", "table6.csv", "fig12.png", "detections.csv", "table5.csv", "table2.csv", "table10.csv",
     "fig16.png", "fig17.png", "speed_vs_accuracy.png", "render_benchmark.png", "fig18.png", "transforms.json", "fig9.png",
+    "fig10.png", "fig11.png", "fig13.png", "fig14.png",
 )  # fmt: skip
 
 
@@ -302,5 +345,6 @@ def test_report_has_every_table_and_figure_with_its_caption(tiny_run):
     # every caption names the preset; the training ones name the protocol
     assert html.count('Preset <tt class=\\"docutils literal\\">tiny</tt>') == len(REPORTED)
     assert html.count('protocol <tt class=\\"docutils literal\\">clean</tt>') + html.count('Protocol <tt class=\\"docutils literal\\">clean</tt>') >= 6
-    for title in ("Table 5: the 1D CNN under five train/test splits", "Figure 16: 1D CNN localisation", "Figure 17: 1D CNN shape", "Figure 9: localisation RMSE"):
+    for title in ("Table 5: the 1D CNN under five train/test splits", "Figure 16: 1D CNN localisation", "Figure 17: 1D CNN shape", "Figure 9: localisation RMSE",
+                  "Figure 10: non-retroreflective objects", "Figure 11: the italic", "Figure 13: 3x3", "Figure 14: 8x8"):  # fmt: skip
         assert title in html

@@ -3,6 +3,8 @@ protocol x seed), light enough for the Snakefile to import: no torch, no sklearn
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 MODELS = ("mlp", "cnn1d", "cnn3d", "transformer")
 LINEAR = "linear"  # the classical reference model (classical.py)
 TASKS = ("location", "shape", "size")
@@ -16,3 +18,16 @@ ILL_POSED = {("shape_held_out", "shape"), ("size_held_out", "size")}
 def is_ill_posed(split: str, task: str) -> bool:
     """True for evaluations whose test labels never occur in training."""
     return (split, task) in ILL_POSED
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One training cell: `model` learns `task` on the `split` of the
+    benchmark's samples at `resolution`, under `protocol`, with `seed`."""
+
+    model: str
+    task: str
+    split: str
+    resolution: str
+    protocol: str
+    seed: int

@@ -16,8 +16,10 @@ import numpy as np
 import pandas as pd
 from sklearn.linear_model import LogisticRegression, Ridge
 
+from denali_pipe.cell_metrics import CellMetrics
+from denali_pipe.cells import Cell
 from denali_pipe.preprocess import normalise
-from denali_pipe.train import Cell, Result, baseline_metrics, metric_rows, partition, selection_key, targets, task_metrics
+from denali_pipe.train import Result, baseline_metrics, metric_rows, partition, selection_key, targets, task_metrics
 
 # Ridge alpha / inverse logistic C, on z-scored log histograms.
 REGULARISATION = (0.1, 1.0, 10.0, 100.0)
@@ -65,25 +67,24 @@ def run_linear(x: np.ndarray, samples: pd.DataFrame, cell: Cell, validation_frac
     out = _scores(cell.task, best[2], xf[split.test], n_classes)
     infer_seconds = time.perf_counter() - t0
     test = task_metrics(cell.task, out, y[split.test])
-    metrics = {
-        "cell": asdict(cell),
-        "hyper": {"regularisation": list(REGULARISATION), "norm": "log_z"},
-        "selected_on": sel_name,
-        "selected_regularisation": best[1],
-        "n_train": int(len(split.train)),
-        "n_validation": int(0 if val is None else len(val)),
-        "n_test": int(len(split.test)),
-        "n_classes": n_classes,
-        "input_shape": list(x.shape[1:]),
-        "params": int(best[2].coef_.size + np.size(best[2].intercept_)),
-        "best_epoch": None,
-        "test": test,
-        "baseline": baseline_metrics(cell.task, y[split.train], y[split.test], n_classes),
-        "train_seconds": train_seconds,
-        "inference_seconds": infer_seconds,
-        "train_samples_per_second": len(split.train) * len(REGULARISATION) / train_seconds,
-        "inference_samples_per_second": len(split.test) / infer_seconds if infer_seconds > 0 else None,
-        "device": "cpu",
-    }
+    metrics = CellMetrics(
+        cell=cell,
+        hyper={"regularisation": list(REGULARISATION), "norm": "log_z"},
+        selected_on=sel_name,
+        selected_regularisation=best[1],
+        n_train=int(len(split.train)),
+        n_validation=int(0 if val is None else len(val)),
+        n_test=int(len(split.test)),
+        n_classes=n_classes,
+        input_shape=tuple(int(d) for d in x.shape[1:]),
+        params=int(best[2].coef_.size + np.size(best[2].intercept_)),
+        test=test,
+        baseline=baseline_metrics(cell.task, y[split.train], y[split.test], n_classes),
+        train_seconds=train_seconds,
+        inference_seconds=infer_seconds,
+        train_samples_per_second=len(split.train) * len(REGULARISATION) / train_seconds,
+        inference_samples_per_second=len(split.test) / infer_seconds if infer_seconds > 0 else None,
+        device="cpu",
+    )
     state = {"model": best[2], "norm_stats": stats, "classes": classes, "cell": asdict(cell)}
     return Result(metrics, pd.DataFrame(rows, columns=["epoch", "part", "metric", "value"]), state)

@@ -22,7 +22,7 @@ def _json(text: str):
         raise argparse.ArgumentTypeError(f"not valid JSON ({e}): {text[:80]!r}") from None
 
 
-def cmd_synth(args: argparse.Namespace) -> None:
+def cmd_rig(args: argparse.Namespace) -> None:
     from denali_pipe.capture_sets import parse_set_name
     from denali_pipe.objects import spec_from_dict
     from denali_pipe.rig.capture import synth_sets
@@ -67,11 +67,11 @@ def cmd_index(args: argparse.Namespace) -> None:
 
 
 def cmd_training_report(args: argparse.Namespace) -> None:
-    from denali_pipe.report.curves import write_curves_figure
-    from denali_pipe.report.speed_accuracy import write_speed_accuracy
+    from denali_pipe.report.speed_vs_accuracy import write_speed_vs_accuracy
     from denali_pipe.report.table2 import write_table2
     from denali_pipe.report.table5 import write_table5
     from denali_pipe.report.table10 import write_table10
+    from denali_pipe.report.training_curves import write_training_curves
 
     paths, out = [Path(p) for p in args.runs], Path(args.out)
     if args.kind == "table5":
@@ -80,11 +80,11 @@ def cmd_training_report(args: argparse.Namespace) -> None:
         write_table2(paths, out)
     elif args.kind == "table10":
         write_table10(paths, out)
-    elif args.kind == "speed-accuracy":
-        write_speed_accuracy(paths, out)
+    elif args.kind == "speed-vs-accuracy":
+        write_speed_vs_accuracy(paths, out)
     else:
         task = {"fig16": "location", "fig17": "shape"}[args.kind]
-        write_curves_figure(paths, task, args.title, out)
+        write_training_curves(paths, task, args.title, out)
     log.info("wrote %s from %d cells", out, len(paths))
 
 def cmd_table4(args: argparse.Namespace) -> None:
@@ -191,21 +191,20 @@ def cmd_dataset(args: argparse.Namespace) -> None:
     from denali_pipe.io.features import read_features
     from denali_pipe.objects import load_catalogue
 
-    x, samples = build_dataset([Path(p) for p in args.features], load_catalogue(args.objects_sheet), location_labels(pd.read_parquet(args.positions)))
+    x, samples = build_dataset([Path(p) for p in args.features], load_catalogue(args.objects_sheet), location_labels(pd.read_parquet(args.positions)), args.variant)
     write_dataset(x, samples, Path(args.out), Path(args.table), read_features(Path(args.features[0]))[1].crop_start)
     log.info("wrote %s %s and %s", args.out, x.shape, args.table)
 
 
 def cmd_train(args: argparse.Namespace) -> None:
-    import json
-
     import torch
 
     from denali_pipe.atomic import atomic_dir
-    from denali_pipe.cells import LINEAR
+    from denali_pipe.cell_metrics import METRICS_FILE
+    from denali_pipe.cells import LINEAR, Cell
     from denali_pipe.classical import run_linear
     from denali_pipe.dataset import read_dataset
-    from denali_pipe.train import Cell, Hyper, run_cell
+    from denali_pipe.train import Hyper, run_cell
 
     torch.set_num_threads(args.threads)
     x, samples, _ = read_dataset(Path(args.dataset), Path(args.table))
@@ -216,14 +215,14 @@ def cmd_train(args: argparse.Namespace) -> None:
         device = "cuda" if torch.cuda.is_available() else "cpu"
         result = run_cell(x, samples, cell, Hyper(**args.hyper), args.validation_fraction, device, args.budget_seconds)
     with atomic_dir(Path(args.outdir)) as tmp:
-        (tmp / "metrics.json").write_text(json.dumps(result.metrics, indent=1) + "\n")
+        (tmp / METRICS_FILE).write_text(result.metrics.to_json())
         result.curves.to_csv(tmp / "curves.csv", index=False)
         torch.save(result.state, tmp / "model.pt")
     m = result.metrics
-    log.info("wrote %s: test %s, %.1f s training (%.0f samples/s)", args.outdir, m["test"], m["train_seconds"], m["train_samples_per_second"])
+    log.info("wrote %s: test %s, %.1f s training (%.0f samples/s)", args.outdir, m.test, m.train_seconds, m.train_samples_per_second)
 
 
-def cmd_render(args: argparse.Namespace) -> None:
+def cmd_twin(args: argparse.Namespace) -> None:
     from denali_pipe.objects import spec_from_dict
     from denali_pipe.twin.render import render_twin
 
@@ -273,7 +272,7 @@ def _pairs_and_split(args: argparse.Namespace):
     return pairs, split_pairs(pairs.keys, args.config["seed"], args.config["fit"]["test_fraction"])
 
 
-def cmd_fit_transforms(args: argparse.Namespace) -> None:
+def cmd_transforms(args: argparse.Namespace) -> None:
     import time
 
     from denali_pipe.transforms import check_fit, fit_transforms, write_transforms
@@ -306,7 +305,7 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     import torch
 
     from denali_pipe.dataset import location_labels
-    from denali_pipe.fig9 import run_fig9
+    from denali_pipe.experiments.fig9 import run_fig9
     from denali_pipe.report.fig9 import write_fig9
     from denali_pipe.train import Hyper
     from denali_pipe.transforms import read_fit_check, read_transforms
@@ -325,6 +324,57 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     out = Path(args.out)
     table = write_fig9(runs, out, out.with_suffix(".csv"))
     log.info("wrote %s and its CSV:\n%s", out, table.to_string(index=False))
+
+
+def cmd_evaluate(args: argparse.Namespace) -> None:
+    from denali_pipe.atomic import atomic_file
+    from denali_pipe.dataset import read_dataset
+    from denali_pipe.evaluate import evaluate_run
+
+    x, samples, _ = read_dataset(Path(args.dataset), Path(args.table))
+    evaluation = evaluate_run(Path(args.run), x, samples, Path(args.dataset))
+    with atomic_file(Path(args.out)) as tmp:
+        tmp.write_text(evaluation.to_json())
+    log.info("wrote %s: %s on %s (%d samples): %s, baseline %s", args.out, args.run, args.dataset, len(samples), evaluation.metrics, evaluation.baseline)
+
+
+def _generalisation_inputs(args: argparse.Namespace) -> tuple[list, list]:
+    from denali_pipe.cell_metrics import CellMetrics
+    from denali_pipe.evaluate import Evaluation
+
+    return [CellMetrics.read(Path(p)) for p in args.cells], [Evaluation.read(Path(p)) for p in args.evaluations]
+
+
+def cmd_fig10(args: argparse.Namespace) -> None:
+    from denali_pipe.dataset import read_dataset
+    from denali_pipe.experiments.generalisation import fig10, histogram_table
+
+    x_variant, variant, crop = read_dataset(Path(args.variant_dataset), Path(args.variant_table))
+    x_base, base, base_crop = read_dataset(Path(args.base_dataset), Path(args.base_table))
+    if crop != base_crop:
+        raise ValueError(f"{args.variant_dataset} starts at bin {crop} but {args.base_dataset} at bin {base_crop}; they must share the crop window")
+    table = fig10(*_generalisation_inputs(args), histogram_table(x_variant, variant, x_base, base, crop), Path(args.out))
+    log.info("wrote %s and its CSV:\n%s", args.out, table[table["panel"] == "score"].dropna(axis=1, how="all").to_string(index=False))
+
+
+def cmd_fig11(args: argparse.Namespace) -> None:
+    from denali_pipe.experiments.generalisation import fig11
+
+    table = fig11(*_generalisation_inputs(args), Path(args.out))
+    log.info("wrote %s and its CSV:\n%s", args.out, table.dropna(axis=1, how="all").to_string(index=False))
+
+
+def cmd_tsne(args: argparse.Namespace) -> None:
+    import torch
+
+    from denali_pipe.dataset import read_dataset
+    from denali_pipe.experiments.tsne import run_tsne, write_tsne
+
+    torch.set_num_threads(args.threads)
+    x, samples, _ = read_dataset(Path(args.dataset), Path(args.table))
+    table = run_tsne([Path(d) for d in args.runs], x, samples, args.seed)
+    write_tsne(table, args.title, Path(args.out))
+    log.info("wrote %s and its CSV:\n%s", args.out, table[table["row"] != "point"].dropna(axis=1, how="all").to_string(index=False))
 
 
 def cmd_rig_examples(args: argparse.Namespace) -> None:
@@ -349,12 +399,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="denali", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="verb", required=True)
 
-    s = sub.add_parser("synth", help="synthesise capture sets of one object and size with the embedded capture rig")
+    s = sub.add_parser("rig", help="synthesise capture sets of one object and size with the embedded capture rig")
     s.add_argument("outs", nargs="+", help="<set>_NLOSdata folders, or <set>_short_NLOSdata.pkl with --format pickle")
     s.add_argument("--object", type=_json, default=None, help="the object's sheet row as JSON (omit for backgrounds)")
     s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "rig": {...}}')
     s.add_argument("--format", choices=["release", "pickle"], default="release", help="release folders or raw pickle streams")
-    s.set_defaults(func=cmd_synth)
+    s.set_defaults(func=cmd_rig)
 
     s = sub.add_parser("ingest", help="ingest one capture set (release folder or pickle stream) into Zarr")
     s.add_argument("source", help="<set>_NLOSdata folder or <set>_short_NLOSdata.pkl stream")
@@ -369,7 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_index)
 
     s = sub.add_parser("report", help="a training table or figure from cells' metrics.json / curves.csv")
-    s.add_argument("kind", choices=["table2", "table5", "table10", "fig16", "fig17", "speed-accuracy"])
+    s.add_argument("kind", choices=["table2", "table5", "table10", "fig16", "fig17", "speed-vs-accuracy"])
     s.add_argument("runs", nargs="+", help="metrics.json files (curves.csv for fig16/fig17)")
     s.add_argument("--title", default="", help="figure title (fig16/fig17)")
     s.add_argument("--out", required=True, help="output CSV or PNG (a PNG gets its data beside it as CSV)")
@@ -414,8 +464,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="output features/<set>.zarr")
     s.set_defaults(func=cmd_preprocess)
 
-    s = sub.add_parser("dataset", help="stack base-object features and location labels into the benchmark samples")
+    s = sub.add_parser("dataset", help="stack one variant's features and location labels into samples (base: the benchmark's)")
     s.add_argument("features", nargs="+", help="features/<set>.zarr of one resolution")
+    s.add_argument("--variant", default="base", help="the objects' variant (objects.VARIANTS): base (the benchmark), italic or nonrr")
     s.add_argument("--positions", required=True, help="calibration/tag1_positions.parquet (location labels)")
     s.add_argument("--objects-sheet", required=True, help="objects.tsv")
     s.add_argument("--out", required=True, help="output datasets/<res>.zarr (array x)")
@@ -433,13 +484,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--outdir", required=True, help="output run folder: metrics.json, curves.csv, model.pt")
     s.set_defaults(func=cmd_train)
 
-    s = sub.add_parser("render", help="render one object and size's digital twin at every calibrated location")
+    s = sub.add_parser("twin", help="render one object and size's digital twin at every calibrated location")
     s.add_argument("scene", help="results/calibration/scene.json")
     s.add_argument("--object", type=_json, required=True, help="the object's sheet row as JSON")
     s.add_argument("--size", required=True, choices=["4inch", "8inch"], help="object size")
     s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "twin": {...}}')
     s.add_argument("--out", required=True, help="output results/twin/<object>_<size>.zarr")
-    s.set_defaults(func=cmd_render)
+    s.set_defaults(func=cmd_twin)
 
     s = sub.add_parser("render-benchmark", help="twin renderers' time per scene against error to a converged reference")
     s.add_argument("scene", help="results/calibration/scene.json")
@@ -458,12 +509,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="PNG path; the plotted data goes beside it as CSV")
     s.set_defaults(func=cmd_fig18)
 
-    s = sub.add_parser("fit-transforms", help="fit the sim-to-real transforms (scale, blur, noise) on the training captures' twins")
+    s = sub.add_parser("transforms", help="fit the sim-to-real transforms (scale, blur, noise) on the training captures' twins")
     s.add_argument("--features", nargs="+", required=True, help="3x3 light-on feature stores (results/features/<set>.zarr)")
     s.add_argument("--twins", nargs="+", required=True, help="their objects' twin stores (results/twin/<object>_<size>.zarr)")
     s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "fit": {...}}')
     s.add_argument("--out", required=True, help="output results/transforms.json")
-    s.set_defaults(func=cmd_fit_transforms)
+    s.set_defaults(func=cmd_transforms)
 
     s = sub.add_parser("fig9", help="Fig 9: localisation RMSE on real captures against real samples added to simulated training data")
     s.add_argument("--features", nargs="+", required=True, help="3x3 light-on feature stores (results/features/<set>.zarr)")
@@ -475,6 +526,35 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
     s.set_defaults(func=cmd_fig9)
+
+    s = sub.add_parser("evaluate", help="score a saved training cell on another dataset (e.g. the italic or non-RR sets)")
+    s.add_argument("run", help="the cell's run folder (model.pt, metrics.json)")
+    s.add_argument("dataset", help="datasets/<name>.zarr to score it on")
+    s.add_argument("--table", required=True, help="datasets/<name>.parquet")
+    s.add_argument("--out", required=True, help="output JSON: the cell's metrics and its baseline's on the dataset")
+    s.set_defaults(func=cmd_evaluate)
+
+    for name, what in (("fig10", "Fig 10: non-RR objects' returns, and base 1D CNN cells scored on them"), ("fig11", "Fig 11: base 1D CNN cells scored on the italic objects")):
+        s = sub.add_parser(name, help=what)
+        s.add_argument("--cells", nargs="+", required=True, help="the cells' metrics.json (their own test scores)")
+        s.add_argument("--evaluations", nargs="+", required=True, help="`denali evaluate` JSONs of those cells on the variant dataset")
+        if name == "fig10":
+            s.add_argument("--variant-dataset", required=True, help="datasets/nonrr_<res>.zarr")
+            s.add_argument("--variant-table", required=True, help="datasets/nonrr_<res>.parquet")
+            s.add_argument("--base-dataset", required=True, help="datasets/<res>.zarr: the retroreflective histograms beside them")
+            s.add_argument("--base-table", required=True, help="datasets/<res>.parquet")
+        s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
+        s.set_defaults(func=cmd_fig10 if name == "fig10" else cmd_fig11)
+
+    s = sub.add_parser("tsne", help="Figs 13/14: t-SNE of shape cells' penultimate-layer embeddings and their separability")
+    s.add_argument("runs", nargs="+", help="run folders of shape cells of one resolution (one per seed)")
+    s.add_argument("--dataset", required=True, help="datasets/<res>.zarr the cells trained on")
+    s.add_argument("--table", required=True, help="datasets/<res>.parquet")
+    s.add_argument("--seed", type=int, required=True, help="the config seed: draws the classes, seeds t-SNE and the folds")
+    s.add_argument("--title", required=True, help="figure title")
+    s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
+    s.set_defaults(func=cmd_tsne)
 
     s = sub.add_parser("rig-examples", help="plot example histograms with the three-bounce bump marked")
     s.add_argument("--sets", nargs="+", required=True, help="object capture-set stores (<set>.zarr)")

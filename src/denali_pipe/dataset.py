@@ -5,7 +5,9 @@ Written by the `dataset` rule as `results/datasets/<res>.zarr` (array `x`,
 (N, n, n, T) float32 preprocessed counts) and `results/datasets/<res>.parquet`
 (one row per sample: set, object, class, type, size, light, location, repeat,
 x, y). Rows follow the reference's order: capture-set name (ASCII), location,
-repeat; the seeded splits depend on it.
+repeat; the seeded splits depend on it. The `variant_dataset` rule writes the
+italic and non-retroreflective sets the same way, as
+`results/datasets/<variant>_<res>.zarr` + `.parquet`.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import zarr
 
 from denali_pipe.atomic import atomic_dir, atomic_file
 from denali_pipe.io.features import read_features
-from denali_pipe.objects import ObjectSpec
+from denali_pipe.objects import VARIANTS, ObjectSpec
 
 SAMPLE_COLUMNS = ("set", "object", "class", "type", "size", "light", "location", "repeat", "x", "y")
 
@@ -32,18 +34,22 @@ def location_labels(positions: pd.DataFrame) -> dict[int, tuple[float, float]]:
     return {int(r.location): (float(r.x), float(r.y)) for r in positions.itertuples()}
 
 
-def build_dataset(feature_paths: list[Path], catalogue: dict[str, ObjectSpec], labels: dict[int, tuple[float, float]]) -> tuple[np.ndarray, pd.DataFrame]:
+def build_dataset(feature_paths: list[Path], catalogue: dict[str, ObjectSpec], labels: dict[int, tuple[float, float]], variant: str = "base") -> tuple[np.ndarray, pd.DataFrame]:
     """Stack the sets' features into (N, n, n, T) float32 and their sample table.
 
     Every set must share one resolution and crop window; the label of every
-    location must exist. Non-base variants are refused (they are held-out
-    test sets, never benchmark samples)."""
+    location must exist. Every object must be of `variant` (objects.VARIANTS):
+    the benchmark's samples are base objects only, and the italic and
+    non-retroreflective sets are datasets of their own (held-out test sets,
+    never training samples)."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown variant {variant!r}; expected one of {VARIANTS}")
     blocks, rows, shape, crop = [], [], None, None
     for path in sorted(feature_paths, key=lambda p: Path(p).name):
         cs, f = read_features(path)
         spec = catalogue.get(cs.object)
-        if spec is None or spec.variant != "base":
-            raise ValueError(f"{path}: object {cs.object!r} is not a base object of the catalogue")
+        if spec is None or spec.variant != variant:
+            raise ValueError(f"{path}: object {cs.object!r} is not a {variant} object of the catalogue")
         if shape is None:
             shape, crop = f.values.shape[2:], f.crop_start
         elif f.values.shape[2:] != shape or f.crop_start != crop:

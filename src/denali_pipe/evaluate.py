@@ -7,13 +7,14 @@ functions below take (N, n, n, T) background-subtracted features, the same
 kind of array the cell was trained on, and return per-sample arrays.
 
 Used by `denali evaluate` (a cell scored on another dataset, e.g. the
-variant sets of Figs 10/11), the t-SNE figures and the explorer.
+variant sets of Figs 10/11: an `Evaluation` record), the t-SNE figures and
+the explorer.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -21,12 +22,13 @@ import pandas as pd
 import torch
 from torch import nn
 
+from denali_pipe.cell_metrics import METRICS_FILE, CellMetrics
+from denali_pipe.cells import Cell
 from denali_pipe.models import build_model
 from denali_pipe.preprocess import normalise
-from denali_pipe.train import EVAL_BATCH, SIZE_CLASSES, Cell, Hyper, task_metrics
+from denali_pipe.train import EVAL_BATCH, SIZE_CLASSES, Hyper, infer, task_metrics
 
 MODEL_FILE = "model.pt"
-METRICS_FILE = "metrics.json"
 
 
 @dataclass(frozen=True)
@@ -35,7 +37,9 @@ class TrainedCell:
 
     classes: class names in output order (None for location, whose two
     outputs are x, y in metres); norm_stats: `preprocess.normalise`'s (mu,
-    sigma) of the cell's training part (None for raw input)."""
+    sigma) of the cell's training part (None for raw input);
+    baseline_output: what the cell's mean / majority baseline answers for
+    every sample (`train.baseline_output`: (2,) m or (C,) scores)."""
 
     model: nn.Module
     cell: Cell
@@ -43,6 +47,7 @@ class TrainedCell:
     norm_stats: tuple[float, float] | None
     classes: list[str] | None
     input_shape: tuple[int, int, int]  # (n, n, T)
+    baseline_output: np.ndarray
 
 
 def load_cell(run_dir: Path) -> TrainedCell:
@@ -56,30 +61,26 @@ def load_cell(run_dir: Path) -> TrainedCell:
         cell, hyper, weights = Cell(**state["cell"]), Hyper(**state["hyper"]), state["model"]
     except (OSError, RuntimeError, KeyError, TypeError) as e:
         raise ValueError(f"{path}: not a training cell's saved model ({e})") from None
-    metrics_path = Path(run_dir) / METRICS_FILE
-    try:
-        n, _, bins = json.loads(metrics_path.read_text())["input_shape"]
-    except (OSError, ValueError, KeyError) as e:
-        raise ValueError(f"{metrics_path}: no input shape of the cell ({e})") from None
+    if "baseline_output" not in state:
+        raise ValueError(f"{path}: saved before cells kept their baseline's output; retrain the cell")
+    n, _, bins = CellMetrics.read(Path(run_dir) / METRICS_FILE).input_shape
     classes = state["classes"]
     model = build_model(cell.model, cell.task, n=n, bins=bins, n_classes=2 if classes is None else len(classes))
     model.load_state_dict(weights)
     model.eval()
     stats = None if state["norm_stats"] is None else tuple(float(v) for v in state["norm_stats"])
-    return TrainedCell(model, cell, hyper, stats, classes, (int(n), int(n), int(bins)))
+    return TrainedCell(model, cell, hyper, stats, classes, (int(n), int(n), int(bins)), np.asarray(state["baseline_output"], np.float64))
 
 
 def _inputs(trained: TrainedCell, x: np.ndarray) -> torch.Tensor:
-    if x.ndim != 4 or x.shape[1:3] != trained.input_shape[:2]:
-        raise ValueError(f"features {x.shape} do not fit a {trained.cell.resolution} cell: expected (N, {trained.input_shape[0]}, {trained.input_shape[1]}, T)")
+    if x.ndim != 4 or x.shape[1:] != trained.input_shape:
+        raise ValueError(f"features {x.shape} do not fit a {trained.cell.resolution} cell: expected (N, {', '.join(map(str, trained.input_shape))})")
     return torch.from_numpy(np.ascontiguousarray(normalise(x, trained.hyper.norm, trained.norm_stats)[0]))
 
 
 def predict(trained: TrainedCell, x: np.ndarray) -> np.ndarray:
     """(N, C) outputs for x (N, n, n, T): positions in metres (location) or logits."""
-    xn = _inputs(trained, x)
-    with torch.no_grad():
-        return torch.cat([trained.model(xn[i : i + EVAL_BATCH]).float() for i in range(0, len(xn), EVAL_BATCH)]).numpy()
+    return infer(trained.model, _inputs(trained, x))
 
 
 def embed(trained: TrainedCell, x: np.ndarray) -> np.ndarray:
@@ -122,3 +123,47 @@ def score(trained: TrainedCell, x: np.ndarray, samples: pd.DataFrame) -> dict:
     if len(samples) != len(x):
         raise ValueError(f"{len(x)} samples but {len(samples)} table rows")
     return task_metrics(trained.cell.task, predict(trained, x), labels(trained, samples))
+
+
+def baseline_score(trained: TrainedCell, samples: pd.DataFrame) -> dict:
+    """`train.task_metrics` of the cell's mean / majority baseline (its
+    training labels' mean position or majority class) on `samples`."""
+    y = labels(trained, samples)
+    return task_metrics(trained.cell.task, np.tile(trained.baseline_output, (len(y), 1)), y)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """A saved cell scored on a dataset it was not trained on: the JSON
+    `denali evaluate` writes. metrics / baseline: `train.task_metrics` of the
+    cell and of its mean / majority baseline on the dataset's n_samples
+    (metres for location); n_classes: the head's outputs (chance Top-1 is
+    1 / n_classes)."""
+
+    cell: Cell
+    run: str
+    dataset: str
+    n_samples: int
+    n_classes: int
+    metrics: dict[str, float]
+    baseline: dict[str, float]
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=1) + "\n"
+
+    @classmethod
+    def read(cls, path: Path) -> Evaluation:
+        """ValueError naming the file when it is not an evaluation."""
+        try:
+            record = json.loads(Path(path).read_text())
+            return cls(**{**record, "cell": Cell(**record["cell"])})
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise ValueError(f"{path}: not a cell's evaluation ({e!r})") from None
+
+
+def evaluate_run(run_dir: Path, x: np.ndarray, samples: pd.DataFrame, dataset: Path) -> Evaluation:
+    """The cell saved in `run_dir` scored on x (N, n, n, T) with sample table
+    `samples` (N rows), read from `dataset`."""
+    trained = load_cell(run_dir)
+    n_classes = 2 if trained.classes is None else len(trained.classes)
+    return Evaluation(trained.cell, str(run_dir), str(dataset), len(samples), n_classes, score(trained, x, samples), baseline_score(trained, samples))

@@ -1,4 +1,6 @@
-"""One training cell: a model trained for one task on one split, one seed.
+"""One training cell: a model trained for one task on one split, one seed;
+and `fit`, the one training loop that the cells and every experiment that
+trains a network (Fig 9, the jitter sweep) go through.
 
 Two protocols:
 - `paper`: as the reference does it: normalisation statistics over all
@@ -19,19 +21,26 @@ DataLoader: its per-batch overhead halves throughput for models this small).
 from __future__ import annotations
 
 import copy
+import logging
+import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
 import pandas as pd
 import torch
 from torch import nn
+from tqdm import tqdm
 
 from denali_pipe import metrics as M
-from denali_pipe.cells import PROTOCOLS, TASKS
+from denali_pipe.cell_metrics import CellMetrics
+from denali_pipe.cells import PROTOCOLS, TASKS, Cell
 from denali_pipe.models import build_model, n_params
 from denali_pipe.preprocess import normalise
 from denali_pipe.splits import Split, make_split, validation_split
+
+log = logging.getLogger(__name__)
 
 SIZE_CLASSES = ("4inch", "8inch")
 EVAL_BATCH = 1024
@@ -48,21 +57,25 @@ class Hyper:
     norm: str
 
 
-@dataclass(frozen=True)
-class Cell:
-    model: str
-    task: str
-    split: str
-    resolution: str
-    protocol: str
-    seed: int
+@dataclass
+class Result:
+    metrics: CellMetrics
+    curves: pd.DataFrame  # long: epoch, part, metric, value
+    state: dict  # model state_dict at the selected epoch plus what evaluation needs
 
 
 @dataclass
-class Result:
-    metrics: dict  # JSON-ready: cell, settings, sizes, selected epoch, test metrics, timings
-    curves: pd.DataFrame  # long: epoch, part, metric, value
-    state: dict  # model state_dict at the selected epoch plus what evaluation needs
+class Fitted:
+    """What `fit` did. state: the model's state_dict at the selected epoch
+    (loaded back into the model); train_seconds: time spent in training
+    batches only (no evaluation)."""
+
+    state: dict
+    best_epoch: int
+    epochs_run: int
+    samples_seen: int
+    train_seconds: float
+    stopped_by_budget: bool
 
 
 def targets(samples: pd.DataFrame, task: str) -> tuple[np.ndarray, list[str] | None]:
@@ -94,7 +107,9 @@ def partition(samples: pd.DataFrame, y: np.ndarray, cell: Cell, validation_fract
     return Split(inner.train, split.test), inner.test
 
 
-def _evaluate(model: nn.Module, x: torch.Tensor, device: torch.device) -> np.ndarray:
+def infer(model: nn.Module, x: torch.Tensor, device: torch.device | str = "cpu") -> np.ndarray:
+    """The model's outputs (N, C) for x (N, ...) in eval mode, in batches of
+    EVAL_BATCH moved to `device`: positions in metres or logits."""
     model.eval()
     outs = []
     with torch.no_grad():
@@ -112,19 +127,105 @@ def selection_key(task: str) -> tuple[str, int]:
     return ("mae", -1) if task == "location" else ("top1", 1)
 
 
-def baseline_metrics(task: str, y_train: np.ndarray, y_test: np.ndarray, n_classes: int) -> dict:
-    """Predict-the-training-mean (location) or the training majority class."""
+def loss_for(task: str) -> nn.Module:
+    """The reference's losses: summed MSE on metre targets (location),
+    cross-entropy on logits (classification)."""
+    return nn.MSELoss(reduction="sum") if task == "location" else nn.CrossEntropyLoss()
+
+
+def baseline_output(task: str, y_train: np.ndarray, n_classes: int) -> np.ndarray:
+    """The one output the mean / majority baseline gives every sample: (2,)
+    the mean training position in m (location), or (n_classes,) scores
+    ranking the classes by their training count (`metrics`' baselines)."""
     if task == "location":
-        return M.regression_metrics(M.predict_mean_baseline(y_train, len(y_test)), y_test)
-    return M.classification_metrics(M.predict_majority_baseline(y_train, len(y_test), n_classes), y_test)
+        return M.predict_mean_baseline(y_train, 1)[0]
+    return M.predict_majority_baseline(y_train, 1, n_classes)[0]
+
+
+def baseline_metrics(task: str, y_train: np.ndarray, y_test: np.ndarray, n_classes: int) -> dict:
+    """Predict-the-training-mean (location) or the training majority class, scored on y_test."""
+    return task_metrics(task, np.tile(baseline_output(task, y_train, n_classes), (len(y_test), 1)), y_test)
+
+
+def fit(
+    model: nn.Module,
+    x: torch.Tensor,
+    y: torch.Tensor,
+    hp: Hyper,
+    seed: int,
+    loss: nn.Module,
+    evaluate_epoch: Callable[[int, np.ndarray, np.ndarray], float] | None = None,
+    budget_seconds: float | None = None,
+    name: str = "training",
+) -> Fitted:
+    """The one training loop: train `model` in place on x (N, ...) and y (N,
+    ...), tensors on the model's device.
+
+    Adam at hp.lr (betas 0.9/0.999, no weight decay, no schedule) for
+    hp.epochs epochs; each epoch visits every sample once, in an order drawn
+    from `seed`, in batches of hp.batch_size, the last one short (as the
+    reference's DataLoader, drop_last False). A batch of one sample is fine
+    for every model: the BatchNorm layers normalise over time (and zones) as
+    well as over the batch, so they never see a single value per channel.
+
+    evaluate_epoch(epoch, rows, outputs): called after each epoch with the
+    rows of x trained on in it (batch order) and the model's train-mode
+    outputs for them, (n, C) numpy; it returns the epoch's score, higher is
+    better, and the best epoch's state is kept (the first on ties). Without
+    it the last epoch's state is kept (a fixed number of epochs).
+
+    budget_seconds: stop (mid-epoch if need be; that epoch is still
+    evaluated) once this much training time is spent, so that models too
+    slow for the machine still give a measured point; None trains every epoch.
+
+    Progress goes to a tqdm bar when stderr is a terminal and to one log line
+    per epoch otherwise. The model ends in the selected state."""
+    opt = torch.optim.Adam(model.parameters(), lr=hp.lr)
+    gen = torch.Generator().manual_seed(seed)
+    best_score, best_epoch, best_state = -np.inf, 0, None
+    train_seconds, seen, over_budget = 0.0, 0, False
+    bar = tqdm(range(1, hp.epochs + 1), desc=name, unit="epoch", disable=not sys.stderr.isatty(), leave=False)
+    for epoch in bar:
+        model.train()
+        t0 = time.perf_counter()
+        order, outs, total, n_batches = torch.randperm(len(x), generator=gen), [], torch.zeros(()), 0
+        for i in range(0, len(order), hp.batch_size):
+            idx = order[i : i + hp.batch_size].to(x.device)
+            opt.zero_grad(set_to_none=True)
+            out = model(x[idx])
+            batch_loss = loss(out, y[idx])
+            batch_loss.backward()
+            opt.step()
+            total, n_batches = total + batch_loss.detach().cpu(), n_batches + 1
+            if evaluate_epoch is not None:
+                outs.append((idx.cpu(), out.detach().float().cpu()))
+            seen += len(idx)
+            over_budget = budget_seconds is not None and train_seconds + time.perf_counter() - t0 > budget_seconds
+            if over_budget:
+                break
+        train_seconds += time.perf_counter() - t0
+        score = None
+        if evaluate_epoch is not None:
+            score = evaluate_epoch(epoch, torch.cat([i for i, _ in outs]).numpy(), torch.cat([o for _, o in outs]).numpy())
+        if evaluate_epoch is None or score > best_score:
+            best_score, best_epoch, best_state = score, epoch, copy.deepcopy(model.state_dict())
+        progress = {"loss": f"{total.item() / n_batches:.4g}", **({} if score is None else {"score": f"{score:.4g}"})}
+        if bar.disable:
+            log.info("%s: epoch %d/%d, mean batch loss %s%s, %.1f s training", name, epoch, hp.epochs, progress["loss"],
+                     "" if score is None else f", score {progress['score']}", train_seconds)  # fmt: skip
+        else:
+            bar.set_postfix(progress)
+        if over_budget:
+            break
+    bar.close()
+    model.load_state_dict(best_state)
+    return Fitted(best_state, best_epoch, epoch, seen, train_seconds, over_budget)
 
 
 def run_cell(x: np.ndarray, samples: pd.DataFrame, cell: Cell, hp: Hyper, validation_fraction: float, device: str = "cpu", budget_seconds: float | None = None) -> Result:
-    """Train one cell on (N, n, n, T) features `x` with sample table `samples`.
-
-    budget_seconds: stop training (mid-epoch if need be; that epoch is still
-    evaluated) once this much training time is spent, so that models too slow
-    for the machine still give a measured point; None trains every epoch."""
+    """Train one cell on (N, n, n, T) features `x` with sample table `samples`
+    (`fit`, with the selection metric of `selection_key` on the validation
+    part or, under `paper`, the test split; `budget_seconds` as there)."""
     if cell.protocol not in PROTOCOLS:
         raise ValueError(f"unknown protocol {cell.protocol!r}; expected one of {PROTOCOLS}")
     torch.manual_seed(cell.seed)
@@ -136,80 +237,66 @@ def run_cell(x: np.ndarray, samples: pd.DataFrame, cell: Cell, hp: Hyper, valida
     # normalisation statistics: training part only (clean) or everything (paper)
     _, stats = normalise(x if cell.protocol == "paper" else x[split.train], hp.norm)
     xn = torch.from_numpy(normalise(x, hp.norm, stats)[0])
-    regression = cell.task == "location"
     yt = torch.from_numpy(np.array(y))  # pandas hands out read-only views
-    n_classes = 2 if regression else len(classes)
+    n_classes = 2 if cell.task == "location" else len(classes)
 
     model = build_model(cell.model, cell.task, n=x.shape[1], bins=x.shape[-1], n_classes=n_classes).to(dev)
-    opt = torch.optim.Adam(model.parameters(), lr=hp.lr)
-    loss_fn = nn.MSELoss(reduction="sum") if regression else nn.CrossEntropyLoss()
     select_on = ("test", split.test) if val is None else ("validation", val)
     metric, sign = selection_key(cell.task)
-
-    x_train, y_train = xn[split.train].to(dev), yt[split.train].to(dev)
     x_sel, y_sel = xn[select_on[1]], y[select_on[1]]
-    gen = torch.Generator().manual_seed(cell.seed)
-    rows, best, train_seconds, n_seen, over_budget = [], (-np.inf, 0, None), 0.0, 0, False
-    for epoch in range(1, hp.epochs + 1):
-        model.train()
-        t0 = time.perf_counter()
-        outs, order = [], torch.randperm(len(x_train), generator=gen)
-        for i in range(0, len(order), hp.batch_size):
-            idx = order[i : i + hp.batch_size].to(dev)
-            opt.zero_grad(set_to_none=True)
-            out = model(x_train[idx])
-            loss_fn(out, y_train[idx]).backward()
-            opt.step()
-            outs.append((idx.cpu(), out.detach().float().cpu()))
-            n_seen += len(idx)
-            over_budget = budget_seconds is not None and train_seconds + time.perf_counter() - t0 > budget_seconds
-            if over_budget:
-                break
-        train_seconds += time.perf_counter() - t0
-        # training metrics from the epoch's own (train-mode) outputs: free, as the paper's curves
-        idx = torch.cat([i for i, _ in outs]).numpy()
-        rows += metric_rows(epoch, "train", task_metrics(cell.task, torch.cat([o for _, o in outs]).numpy(), y[split.train][idx]))
-        sel = task_metrics(cell.task, _evaluate(model, x_sel, dev), y_sel)
-        rows += metric_rows(epoch, select_on[0], sel)
-        if sign * sel[metric] > best[0]:
-            best = (sign * sel[metric], epoch, copy.deepcopy(model.state_dict()))
-        if over_budget:
-            break
+    rows = []
 
-    model.load_state_dict(best[2])
+    def evaluate_epoch(epoch: int, seen: np.ndarray, out: np.ndarray) -> float:
+        # training metrics from the epoch's own (train-mode) outputs: free, as the paper's curves
+        rows.extend(metric_rows(epoch, "train", task_metrics(cell.task, out, y[split.train][seen])))
+        sel = task_metrics(cell.task, infer(model, x_sel, dev), y_sel)
+        rows.extend(metric_rows(epoch, select_on[0], sel))
+        return sign * sel[metric]
+
+    name = f"{cell.model} {cell.task} {cell.split} {cell.resolution} seed {cell.seed}"
+    fitted = fit(model, xn[split.train].to(dev), yt[split.train].to(dev), hp, cell.seed, loss_for(cell.task), evaluate_epoch, budget_seconds, name)
+
     t0 = time.perf_counter()
-    test_out = _evaluate(model, xn[split.test], dev)
+    test_out = infer(model, xn[split.test], dev)
     infer_seconds = time.perf_counter() - t0
     test = task_metrics(cell.task, test_out, y[split.test])
     if val is not None:
-        rows += metric_rows(best[1], "test", test)
+        rows += metric_rows(fitted.best_epoch, "test", test)
 
-    result = {
+    result = CellMetrics(
+        cell=cell,
+        hyper=asdict(hp),
+        validation_fraction=validation_fraction if val is not None else None,
+        selected_on=select_on[0],
+        n_train=int(len(split.train)),
+        n_validation=int(0 if val is None else len(val)),
+        n_test=int(len(split.test)),
+        n_classes=n_classes,
+        input_shape=tuple(int(d) for d in x.shape[1:]),
+        params=n_params(model),
+        best_epoch=fitted.best_epoch,
+        epochs_run=fitted.epochs_run,
+        samples_seen=fitted.samples_seen,
+        budget_seconds=budget_seconds,
+        stopped_by_budget=fitted.stopped_by_budget,
+        test=test,
+        baseline=baseline_metrics(cell.task, y[split.train], y[split.test], n_classes),
+        train_seconds=fitted.train_seconds,
+        inference_seconds=infer_seconds,
+        train_samples_per_second=fitted.samples_seen / fitted.train_seconds if fitted.train_seconds > 0 else None,
+        inference_samples_per_second=len(split.test) / infer_seconds if infer_seconds > 0 else None,
+        device=str(dev),
+        threads=torch.get_num_threads(),
+    )
+    state = {
+        "model": fitted.state,
+        "norm_stats": stats,
+        "classes": classes,
         "cell": asdict(cell),
         "hyper": asdict(hp),
-        "validation_fraction": validation_fraction if val is not None else None,
-        "selected_on": select_on[0],
-        "n_train": int(len(split.train)),
-        "n_validation": int(0 if val is None else len(val)),
-        "n_test": int(len(split.test)),
-        "n_classes": n_classes,
-        "input_shape": list(x.shape[1:]),
-        "params": n_params(model),
-        "best_epoch": int(best[1]),
-        "epochs_run": epoch,
-        "samples_seen": n_seen,
-        "budget_seconds": budget_seconds,
-        "stopped_by_budget": over_budget,
-        "test": test,
-        "baseline": baseline_metrics(cell.task, y[split.train], y[split.test], n_classes),
-        "train_seconds": train_seconds,
-        "inference_seconds": infer_seconds,
-        "train_samples_per_second": n_seen / train_seconds if train_seconds > 0 else None,
-        "inference_samples_per_second": len(split.test) / infer_seconds if infer_seconds > 0 else None,
-        "device": str(dev),
-        "threads": torch.get_num_threads(),
+        # what the cell's mean / majority baseline predicts, so that a saved cell scores its baseline on other data
+        "baseline_output": [float(v) for v in baseline_output(cell.task, y[split.train], n_classes)],
     }
-    state = {"model": best[2], "norm_stats": stats, "classes": classes, "cell": asdict(cell), "hyper": asdict(hp)}
     return Result(result, pd.DataFrame(rows, columns=["epoch", "part", "metric", "value"]), state)
 
 

@@ -521,14 +521,14 @@ def read_transforms(path: Path) -> Transforms:
 
 def read_fit_check(path: Path) -> FitCheck:
     """Read transforms.json's check; ValueError naming the file when it has
-    none (written before fits were checked: refit with `denali fit-transforms`)
+    none (written before fits were checked: refit with `denali transforms`)
     or it is malformed."""
     try:
         d = json.loads(Path(path).read_text())
     except ValueError as e:
         raise ValueError(f"{path}: not a transforms file ({type(e).__name__}: {e})") from None
     if "check" not in d:
-        raise ValueError(f"{path}: no 'check' entry (peak SNR, bootstrap, identifiability); the file predates checked fits: refit it with `denali fit-transforms`")
+        raise ValueError(f"{path}: no 'check' entry (peak SNR, bootstrap, identifiability); the file predates checked fits: refit it with `denali transforms`")
     try:
         c, b = d["check"], d["check"]["bootstrap"]
         boot = Bootstrap(int(b["resamples"]), int(b["seed"]), float(b["level"]), dict(b["se"]), dict(b["interval"]), float(b["kernel_l1"]))

@@ -19,8 +19,8 @@ import numpy as np
 import pandas as pd
 
 from denali_pipe import geometry as geo
-from denali_pipe.atomic import atomic_file
 from denali_pipe.io.store import open_set
+from denali_pipe.report.figure import plt, save_figure
 
 COMPONENT_COLOURS = {"table": "tab:brown", "relay_wall": "tab:blue", "lidar": "tab:green", "object": "tab:red", "unknown": "tab:gray"}
 AXIS_LENGTH_M = geo.TAG_SIZE
@@ -92,11 +92,6 @@ def write_fig12(
     of its set's pose table; filtered: `filter_estimates` output of every set;
     objects: `object_positions` (default: means of the kept object-tag
     estimates per location). Returns the plotted data."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     data = fig12_data(frame_rows, filtered, objects)
     img = annotate_frame(frame, frame_rows)
     fig = plt.figure(figsize=(14, 5.2), constrained_layout=True)
@@ -125,13 +120,7 @@ def write_fig12(
         ax.set_title(label, fontsize=9)
         if k == 0:
             ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
-    out_png = Path(out_png)
-    out_csv = Path(out_csv) if out_csv is not None else out_png.with_suffix(".csv")
-    with atomic_file(out_png) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-    with atomic_file(out_csv) as tmp:
-        data.to_csv(tmp, index=False, float_format="%.6g")
+    save_figure(fig, out_png, data, out_csv, float_format="%.6g")
     return data
 
 

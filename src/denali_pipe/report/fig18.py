@@ -19,21 +19,17 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from denali_pipe import geometry as geo  # noqa: E402
-from denali_pipe.atomic import atomic_file  # noqa: E402
-from denali_pipe.io.store import CaptureStore, open_set  # noqa: E402
-from denali_pipe.objects import object_mesh, spec_from_dict  # noqa: E402
-from denali_pipe.preprocess import subtract_background  # noqa: E402
-from denali_pipe.seeds import derive_seed, rng_for  # noqa: E402
-from denali_pipe.twin.layout import Calibration, load_calibration, twin_scene  # noqa: E402
-from denali_pipe.twin.render import Twin, read_twin  # noqa: E402
+from denali_pipe import geometry as geo
+from denali_pipe.io.store import CaptureStore, open_set
+from denali_pipe.objects import object_mesh, spec_from_dict
+from denali_pipe.preprocess import subtract_background
+from denali_pipe.report.figure import plt, save_figure
+from denali_pipe.seeds import derive_seed, rng_for
+from denali_pipe.twin.layout import Calibration, load_calibration, twin_scene
+from denali_pipe.twin.render import Twin, read_twin
 
 CENTRE = (1, 1)  # the centre zone of the 3x3 grid
 SMOOTH_BINS = 5  # a box mean shows the ~10-bin bump above the shot noise of one bin
@@ -103,9 +99,4 @@ def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, crop: int, 
         ax.legend(handles=ax.get_lines() + twin_ax.get_lines(), fontsize=7, loc="upper right")
         rows.append(pd.DataFrame({"set": store.name, "location": location, "bin": bins, "real_counts": real, "sim": sim, "kept": kept}))
     fig.tight_layout()
-    out_png = Path(out_png)
-    with atomic_file(out_png.with_suffix(".csv")) as tmp:
-        pd.concat(rows, ignore_index=True).to_csv(tmp, index=False)
-    with atomic_file(out_png) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out_png, pd.concat(rows, ignore_index=True))

@@ -3,7 +3,7 @@ training samples, one curve per simulation fidelity, mean +- std over seeds,
 and the predict-the-mean baseline as a dashed horizontal line.
 
 `results/fig9.csv` (one row per fidelity and n_real, then one for
-`fig9.MEAN_BASELINE` at n_real 0: rmse, mse, mae, rmse_euclidean, each a mean
+`experiments.fig9.MEAN_BASELINE` at n_real 0: rmse, mse, mae, rmse_euclidean, each a mean
 over seeds with a matching `_std`, n_seeds, n_sim, n_test) beside
 `results/fig9.png`.
 """
@@ -12,15 +12,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from denali_pipe.atomic import atomic_file  # noqa: E402
-from denali_pipe.fig9 import MEAN_BASELINE  # noqa: E402
-from denali_pipe.transforms import FIDELITIES  # noqa: E402
+from denali_pipe.experiments.fig9 import MEAN_BASELINE
+from denali_pipe.report.figure import plt, save_figure
+from denali_pipe.transforms import FIDELITIES
 
 METRICS = ("rmse", "mse", "mae", "rmse_euclidean")
 LABELS = {"raw": "raw simulation", "scaled": "scaled", "blurred": "scaled + blurred", "noisy": "scaled + blurred + noisy", MEAN_BASELINE: "predict the training mean"}
@@ -40,7 +36,7 @@ def aggregate(runs: pd.DataFrame) -> pd.DataFrame:
 
 
 def write_fig9(runs: pd.DataFrame, out_png: Path, out_csv: Path) -> pd.DataFrame:
-    """Aggregate the per-seed runs (`fig9.run_fig9`), write the CSV and the PNG; returns the table."""
+    """Aggregate the per-seed runs (`experiments.fig9.run_fig9`), write the CSV and the PNG; returns the table."""
     table = aggregate(runs)
     # constrained layout makes room for the legend outside the axes, clear of the curves
     fig, ax = plt.subplots(figsize=(7.2, 3.6), constrained_layout=True)
@@ -58,9 +54,5 @@ def write_fig9(runs: pd.DataFrame, out_png: Path, out_csv: Path) -> pd.DataFrame
     ax.set_title(f"Sim-to-real localisation (1D CNN, centre pixel, {int(table['n_seeds'].min())} seeds)", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
-    with atomic_file(Path(out_csv)) as tmp:
-        table.to_csv(tmp, index=False)
-    with atomic_file(Path(out_png)) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out_png, table, out_csv)
     return table

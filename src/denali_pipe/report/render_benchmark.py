@@ -6,14 +6,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import pandas as pd
+from matplotlib.ticker import FormatStrFormatter
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.ticker import FormatStrFormatter  # noqa: E402
-
-from denali_pipe.atomic import atomic_file  # noqa: E402
+from denali_pipe.report.figure import plt, save_figure
 
 
 def plot_render_benchmark(summary: pd.DataFrame, out_png: Path) -> None:
@@ -40,9 +36,4 @@ def plot_render_benchmark(summary: pd.DataFrame, out_png: Path) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    out_png = Path(out_png)
-    with atomic_file(out_png.with_suffix(".csv")) as tmp:
-        summary.to_csv(tmp, index=False)
-    with atomic_file(out_png) as tmp:
-        fig.savefig(tmp, format="png", dpi=130)
-    plt.close(fig)
+    save_figure(fig, out_png, summary)

@@ -14,18 +14,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from denali_pipe import geometry as geo  # noqa: E402
-from denali_pipe.atomic import atomic_file  # noqa: E402
-from denali_pipe.io.store import open_set  # noqa: E402
-from denali_pipe.report.paper import REAL_CENTRE_ZONE  # noqa: E402
-from denali_pipe.rig.measure import measure  # noqa: E402
+from denali_pipe import geometry as geo
+from denali_pipe.io.store import open_set
+from denali_pipe.report.figure import plt, save_figure
+from denali_pipe.report.paper import REAL_CENTRE_ZONE
+from denali_pipe.rig.measure import measure
 
 CENTRE_ZONE = (1, 1)
 # The panels show counts up to this fraction of the direct peak: the bump lives there.
@@ -101,9 +97,5 @@ def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path) ->
     real = "\n".join(f"{name}: {real_summary(v)}" for name, v in REAL_CENTRE_ZONE.items())
     fig.suptitle(f"Raw centre-zone histograms, zoomed to {ZOOM:.0%} of the direct peak. Real captures, read off the release's figures:\n{real}", fontsize=8)
     fig.tight_layout()
-    with atomic_file(Path(out_csv)) as tmp:
-        table.to_csv(tmp, index=False)
-    with atomic_file(Path(out_png)) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, out_png, table, out_csv)
     return table

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
-import json
+from dataclasses import asdict
 from pathlib import Path
 
 import pandas as pd
+
+from denali_pipe.cell_metrics import CellMetrics
 
 CELL_COLUMNS = ("model", "task", "split", "resolution", "protocol")
 # Table metric name -> (task, metric key in metrics.json); the paper's columns.
@@ -25,30 +27,32 @@ NA = "n/a"
 
 
 def load_runs(paths: list[Path]) -> pd.DataFrame:
-    """One row per metrics.json: the cell's fields, seed, sizes, timings,
-    `test_<metric>` and `baseline_<metric>` columns."""
+    """One row per metrics.json (`CellMetrics`): the cell's fields, seed,
+    sizes, timings, `test_<metric>` and `baseline_<metric>` columns."""
     rows = []
     for p in paths:
-        try:
-            m = json.loads(Path(p).read_text())
-            row = {**m["cell"], "params": m["params"], "n_train": m["n_train"], "n_validation": m["n_validation"], "n_test": m["n_test"]}
-        except (OSError, json.JSONDecodeError, KeyError) as e:
-            raise ValueError(f"{p}: not a training cell's metrics.json ({e})") from None
-        row.update(
-            best_epoch=m.get("best_epoch"),
-            epochs=m["hyper"].get("epochs"),
-            epochs_run=m.get("epochs_run"),
-            stopped_by_budget=m.get("stopped_by_budget", False),
-            batch_size=m["hyper"].get("batch_size"),
-            selected_on=m["selected_on"],
-            train_seconds=m["train_seconds"],
-            inference_seconds=m["inference_seconds"],
-            train_samples_per_second=m["train_samples_per_second"],
-            device=m.get("device"),
+        m = CellMetrics.read(p)
+        rows.append(
+            {
+                **asdict(m.cell),
+                "params": m.params,
+                "n_train": m.n_train,
+                "n_validation": m.n_validation,
+                "n_test": m.n_test,
+                "best_epoch": m.best_epoch,
+                "epochs": m.hyper.get("epochs"),
+                "epochs_run": m.epochs_run,
+                "stopped_by_budget": m.stopped_by_budget,
+                "batch_size": m.hyper.get("batch_size"),
+                "selected_on": m.selected_on,
+                "train_seconds": m.train_seconds,
+                "inference_seconds": m.inference_seconds,
+                "train_samples_per_second": m.train_samples_per_second,
+                "device": m.device,
+                **{f"test_{k}": v for k, v in m.test.items()},
+                **{f"baseline_{k}": v for k, v in m.baseline.items()},
+            }
         )
-        row.update({f"test_{k}": v for k, v in m["test"].items()})
-        row.update({f"baseline_{k}": v for k, v in m["baseline"].items()})
-        rows.append(row)
     if not rows:
         raise ValueError("no training cells given")
     return pd.DataFrame(rows)

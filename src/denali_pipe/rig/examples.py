@@ -11,18 +11,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from denali_pipe import geometry as geo  # noqa: E402
-from denali_pipe.atomic import atomic_file  # noqa: E402
-from denali_pipe.io.store import open_set  # noqa: E402
-from denali_pipe.objects import BOTTOM_Y, SIZES  # noqa: E402
-from denali_pipe.rig.histograms import wall_samples  # noqa: E402
+from denali_pipe import geometry as geo
+from denali_pipe.io.store import open_set
+from denali_pipe.objects import BOTTOM_Y, SIZES
+from denali_pipe.report.figure import plt, save_figure
+from denali_pipe.rig.histograms import wall_samples
 
 PULSE_MARGIN_BINS = (3, 8)  # jitter before, SPAD tail after the geometric window
 SMOOTH_BINS = 5  # the bump spans ~10 bins; a short box mean shows it above shot noise
@@ -96,8 +92,4 @@ def rig_examples(pairs: list[tuple[Path, Path]], out_png: Path) -> None:
                     "in_predicted_window": lo <= b <= hi,
                 })
     fig.tight_layout()
-    with atomic_file(out_png) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    with atomic_file(out_png.with_suffix(".csv")) as tmp:
-        pd.DataFrame(rows).to_csv(tmp, index=False)
+    save_figure(fig, out_png, pd.DataFrame(rows))

@@ -9,13 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from denali_pipe.atomic import atomic_file  # noqa: E402
+from denali_pipe.report.figure import plt, save_figure
 
 PANELS = {"location": ("mse", "mae"), "shape": ("top1", "top5", "f1", "precision", "recall")}
 LABELS = {"mse": "MSE (m$^2$)", "mae": "MAE (m)", "top1": "Top-1", "top5": "Top-5", "f1": "macro F1", "precision": "macro precision", "recall": "macro recall"}
@@ -34,7 +30,7 @@ def load_curves(paths: list[Path]) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
-def write_curves_figure(paths: list[Path], task: str, title: str, out: Path) -> None:
+def write_training_curves(paths: list[Path], task: str, title: str, out: Path) -> None:
     """Plot `task`'s curves from several seeds' curves.csv; data beside as CSV."""
     curves = load_curves(paths)
     metrics = PANELS[task]
@@ -57,8 +53,4 @@ def write_curves_figure(paths: list[Path], task: str, title: str, out: Path) -> 
     axes[0][0].legend(fontsize=7)
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    with atomic_file(out) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
-    with atomic_file(out.with_suffix(".csv")) as tmp:
-        summary.to_csv(tmp, index=False)
+    save_figure(fig, out, summary)

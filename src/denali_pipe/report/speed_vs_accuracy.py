@@ -6,15 +6,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from denali_pipe.atomic import atomic_file  # noqa: E402
-from denali_pipe.cells import TASKS  # noqa: E402
-from denali_pipe.report.runs import HEADLINE, load_runs, protocol_of, seed_stats  # noqa: E402
+from denali_pipe.cells import TASKS
+from denali_pipe.report.figure import plt, save_figure
+from denali_pipe.report.runs import HEADLINE, load_runs, protocol_of, seed_stats
 
 LABELS = {"rmse": "test RMSE (m), lower is better", "top1": "test Top-1, higher is better"}
 
@@ -31,7 +27,7 @@ def pareto(points: pd.DataFrame, higher_is_better: bool) -> pd.Series:
     return pd.Series(front, index=points.index)
 
 
-def speed_accuracy_table(runs: pd.DataFrame) -> pd.DataFrame:
+def speed_vs_accuracy_table(runs: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for task in TASKS:
         sub = runs[runs["task"] == task]
@@ -47,10 +43,10 @@ def speed_accuracy_table(runs: pd.DataFrame) -> pd.DataFrame:
     return pd.concat(rows, ignore_index=True)
 
 
-def write_speed_accuracy(metrics_paths: list[Path], out: Path) -> None:
+def write_speed_vs_accuracy(metrics_paths: list[Path], out: Path) -> None:
     runs = load_runs(metrics_paths)
     protocol = protocol_of(runs)
-    table = speed_accuracy_table(runs)
+    table = speed_vs_accuracy_table(runs)
     tasks = [t for t in TASKS if t in set(table["task"])]
     fig, axes = plt.subplots(1, len(tasks), figsize=(4.2 * len(tasks), 3.6), squeeze=False)
     for ax, task in zip(axes[0], tasks):
@@ -71,8 +67,4 @@ def write_speed_accuracy(metrics_paths: list[Path], out: Path) -> None:
     axes[0][0].legend(fontsize=6)
     fig.suptitle(f"speed vs accuracy ({runs['resolution'].iloc[0]}, random split, {protocol} protocol; filled: Pareto front)", fontsize=9)
     fig.tight_layout()
-    with atomic_file(out) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
-    with atomic_file(out.with_suffix(".csv")) as tmp:
-        table.assign(protocol=protocol).to_csv(tmp, index=False)
+    save_figure(fig, out, table.assign(protocol=protocol))

@@ -40,7 +40,7 @@ from denali_pipe.metrics import predict_mean_baseline, regression_metrics
 from denali_pipe.models import build_model
 from denali_pipe.preprocess import normalise
 from denali_pipe.seeds import derive_seed, rng_for
-from denali_pipe.train import EVAL_BATCH, Hyper
+from denali_pipe.train import Hyper, fit, infer, loss_for
 from denali_pipe.transforms import FIDELITIES, Pairs, Transforms, apply, split_pairs
 
 log = logging.getLogger(__name__)
@@ -73,36 +73,21 @@ def real_samples(pairs: Pairs, y: np.ndarray, n: int, seed: int) -> tuple[np.nda
 
 def train_localiser(x: np.ndarray, y: np.ndarray, hp: Hyper, seed: int) -> tuple[nn.Module, tuple | None]:
     """A fresh 1D CNN (location, one zone) trained on x (N, T), y (N, 2) for
-    hp.epochs: Adam at hp.lr, summed MSE on metres, batches of hp.batch_size
-    in a seeded order (as `train.run_cell`). Returns the model and its
-    normalisation statistics (`preprocess.normalise`, from x)."""
+    hp.epochs through `train.fit` (the cells' loop and loss, no model
+    selection). Returns the model and its normalisation statistics
+    (`preprocess.normalise`, from x)."""
     torch.manual_seed(seed)
     xn, stats = normalise(x, hp.norm)
     xt = torch.from_numpy(np.ascontiguousarray(xn[:, None, None, :]))
     yt = torch.from_numpy(np.ascontiguousarray(y, np.float32))
     model = build_model("cnn1d", "location", n=1, bins=x.shape[-1], n_classes=2)
-    opt = torch.optim.Adam(model.parameters(), lr=hp.lr)
-    loss_fn = nn.MSELoss(reduction="sum")
-    gen = torch.Generator().manual_seed(seed)
-    model.train()
-    for _ in range(hp.epochs):
-        order = torch.randperm(len(xt), generator=gen)
-        for i in range(0, len(order), hp.batch_size):
-            idx = order[i : i + hp.batch_size]
-            if len(idx) < 2:  # BatchNorm needs two samples to train on
-                continue
-            opt.zero_grad(set_to_none=True)
-            loss_fn(model(xt[idx]), yt[idx]).backward()
-            opt.step()
+    fit(model, xt, yt, hp, seed, loss_for("location"), name="fig9 localiser")
     return model, stats
 
 
 def predict(model: nn.Module, stats: tuple | None, x: np.ndarray, norm: str) -> np.ndarray:
     """(N, 2) predicted positions (m) of x (N, T) counts."""
-    xn = torch.from_numpy(np.ascontiguousarray(normalise(x, norm, stats)[0][:, None, None, :]))
-    model.eval()
-    with torch.no_grad():
-        return torch.cat([model(xn[i : i + EVAL_BATCH]) for i in range(0, len(xn), EVAL_BATCH)]).numpy()
+    return infer(model, torch.from_numpy(np.ascontiguousarray(normalise(x, norm, stats)[0][:, None, None, :])))
 
 
 def bound_to_workspace(pred: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

@@ -1,0 +1,101 @@
+# Figs 10 and 11 (experiments/generalisation.py): the benchmark's random-split
+# 1D CNN cells, trained on the base objects, scored on the non-retroreflective
+# (Fig 10) and italic (Fig 11) sets, each a dataset of its own.
+
+from denali_pipe.objects import VARIANTS
+
+HELD_OUT = [v for v in VARIANTS if v != "base"]
+# Per figure: the variant it scores on and the tasks it scores (the paper's).
+GENERALISATION = {"fig10": ("nonrr", ["location", "shape", "size"]), "fig11": ("italic", ["location", "shape"])}
+# `denali evaluate`'s output: one cell (RUN_DIR's fields) scored on one dataset.
+EVALUATION = RUN_DIR.replace("results/runs/", "results/evaluations/{dataset}/") + ".json"
+
+
+def variant_sets(variant, res):
+    """The capture sets of one variant's objects at a resolution (both sizes
+    and lightings). Drawn when a rule needs them, so a config without them
+    fails only then."""
+    sets = [s.name for s in SETS if s.resolution == res and not s.is_background and CATALOGUE[s.object].variant == variant]
+    if not sets:
+        raise ValueError(f"no {variant} capture sets at {res}: Figs 10/11 need them (config `objects`, `resolutions`)")
+    return sets
+
+
+def generalisation_inputs(figure):
+    """The cells a figure scores (metrics.json), their evaluations on its
+    variant's dataset at the tables' resolution, and that dataset."""
+    variant, tasks = GENERALISATION[figure]
+    res = TRAIN["resolution"]
+    dataset = f"{variant}_{res}"
+    return {
+        "cells": run_files(["cnn1d"], tasks, ["random"]),
+        "evaluations": [d.replace("results/runs/", f"results/evaluations/{dataset}/") + ".json" for d in run_dirs(["cnn1d"], tasks, ["random"])],
+        "variant_x": f"results/datasets/{dataset}.zarr",
+        "variant_table": f"results/datasets/{dataset}.parquet",
+    }
+
+
+rule variant_dataset:
+    input:
+        features=lambda w: [f"results/features/{name}.zarr" for name in variant_sets(w.variant, w.res)],
+        positions="results/calibration/tag1_positions.parquet",
+        sheet=config["objects_sheet"],
+    output:
+        x=directory("results/datasets/{variant}_{res}.zarr"),
+        table="results/datasets/{variant}_{res}.parquet",
+    wildcard_constraints:
+        variant="|".join(HELD_OUT),
+    log:
+        "logs/datasets/{variant}_{res}.log",
+    shell:
+        "{DENALI} dataset {input.features} --variant {wildcards.variant} --positions {input.positions} --objects-sheet {input.sheet}"
+        " --out {output.x} --table {output.table} > {log} 2>&1"
+
+
+rule evaluate:
+    input:
+        model=f"{RUN_DIR}/model.pt",
+        metrics=f"{RUN_DIR}/metrics.json",
+        x="results/datasets/{dataset}.zarr",
+        table="results/datasets/{dataset}.parquet",
+    output:
+        EVALUATION,
+    params:
+        run=lambda w, input: Path(input.model).parent,
+    wildcard_constraints:
+        dataset=rf"({'|'.join(HELD_OUT)})_(3x3|8x8)",
+    log:
+        "logs/" + EVALUATION.removeprefix("results/").removesuffix(".json") + ".log",
+    shell:
+        "{DENALI} evaluate {params.run} {input.x} --table {input.table} --out {output} > {log} 2>&1"
+
+
+rule fig10:
+    input:
+        **generalisation_inputs("fig10"),
+        base_x=f"results/datasets/{TRAIN['resolution']}.zarr",
+        base_table=f"results/datasets/{TRAIN['resolution']}.parquet",
+    output:
+        png=report("results/fig10.png", caption="../report/fig10.rst", category="6. Generalisation"),
+        csv="results/fig10.csv",
+    log:
+        "logs/fig10.log",
+    benchmark:
+        "benchmarks/fig10.tsv"
+    shell:
+        "{DENALI} fig10 --cells {input.cells} --evaluations {input.evaluations} --variant-dataset {input.variant_x} --variant-table {input.variant_table}"
+        " --base-dataset {input.base_x} --base-table {input.base_table} --out {output.png} > {log} 2>&1"
+
+
+rule fig11:
+    input:
+        **generalisation_inputs("fig11"),
+    output:
+        png=report("results/fig11.png", caption="../report/fig11.rst", category="6. Generalisation"),
+        csv="results/fig11.csv",
+    log:
+        "logs/fig11.log",
+    benchmark:
+        "benchmarks/fig11.tsv"
+    shell:
+        "{DENALI} fig11 --cells {input.cells} --evaluations {input.evaluations} --out {output.png} > {log} 2>&1"

@@ -1,0 +1,31 @@
+# Figs 13 and 14 (experiments/tsne.py): t-SNE of the random-split 1D CNN
+# shape cells' penultimate-layer embeddings at 3x3 and 8x8, with the classes'
+# separability in the embedding space.
+
+TSNE_RESOLUTION = {"fig13": "3x3", "fig14": "8x8"}
+
+
+rule tsne:
+    input:
+        models=lambda w: run_files(["cnn1d"], ["shape"], ["random"], "model.pt", TSNE_RESOLUTION[w.fig]),
+        metrics=lambda w: run_files(["cnn1d"], ["shape"], ["random"], "metrics.json", TSNE_RESOLUTION[w.fig]),
+        x=lambda w: f"results/datasets/{TSNE_RESOLUTION[w.fig]}.zarr",
+        table=lambda w: f"results/datasets/{TSNE_RESOLUTION[w.fig]}.parquet",
+    output:
+        png=report("results/{fig}.png", caption="../report/tsne.rst", category="7. Embeddings"),
+        csv="results/{fig}.csv",
+    params:
+        runs=lambda w, input: [Path(p).parent for p in input.models],
+        title=lambda w: shlex.quote(
+            f"t-SNE of the 1D CNN shape classifier's penultimate layer ({TSNE_RESOLUTION[w.fig]}, random split, {TRAIN['protocol']} protocol)"
+        ),
+    wildcard_constraints:
+        fig="fig13|fig14",
+    threads: config["train"]["threads"]
+    log:
+        "logs/{fig}.log",
+    benchmark:
+        "benchmarks/{fig}.tsv"
+    shell:
+        "{DENALI} tsne {params.runs} --dataset {input.x} --table {input.table} --seed {config[seed]} --title {params.title}"
+        " --threads {threads} --out {output.png} > {log} 2>&1"
