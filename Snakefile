@@ -15,6 +15,7 @@ include: "rules/preprocess.smk"
 include: "rules/train.smk"
 include: "rules/report.smk"
 include: "rules/fit.smk"
+include: "rules/jitter.smk"
 
 
 rule all:
@@ -28,6 +29,9 @@ rule all:
         "results/calibration/detections.csv",
         "results/table5.csv",
         "results/table2.csv",
+        "results/table7.csv",
+        "results/table8.csv",
+        "results/table9.csv",
         "results/table10.csv",
         "results/fig16.png",
         "results/fig17.png",
@@ -37,4 +41,5 @@ rule all:
         "results/fig18.png",
         "results/transforms.json",
         "results/fig9.png",
+        "results/jitter.png",
     default_target: True

@@ -29,6 +29,7 @@ from torch import nn
 
 from denali_pipe import metrics as M
 from denali_pipe.cells import PROTOCOLS, TASKS
+from denali_pipe.conditions import ALL
 from denali_pipe.models import build_model, n_params
 from denali_pipe.preprocess import normalise
 from denali_pipe.splits import Split, make_split, validation_split
@@ -56,6 +57,7 @@ class Cell:
     resolution: str
     protocol: str
     seed: int
+    condition: str = ALL  # the samples it trains and tests on (conditions.py)
 
 
 @dataclass

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
-CELL_COLUMNS = ("model", "task", "split", "resolution", "protocol")
+CELL_COLUMNS = ("model", "task", "split", "resolution", "condition", "protocol")
 # Table metric name -> (task, metric key in metrics.json); the paper's columns.
 METRICS = {
     "loc_rmse": ("location", "rmse"),
