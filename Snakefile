@@ -18,6 +18,7 @@ include: "rules/fit.smk"
 include: "rules/fig9.smk"
 include: "rules/generalisation.smk"
 include: "rules/tsne.smk"
+include: "rules/jitter.smk"
 
 
 rule all:
@@ -31,6 +32,9 @@ rule all:
         "results/calibration/detections.csv",
         "results/table5.csv",
         "results/table2.csv",
+        "results/table7.csv",
+        "results/table8.csv",
+        "results/table9.csv",
         "results/table10.csv",
         "results/fig16.png",
         "results/fig17.png",
@@ -44,4 +48,5 @@ rule all:
         "results/fig11.png",
         "results/fig13.png",
         "results/fig14.png",
+        "results/jitter.png",
     default_target: True

@@ -1,4 +1,5 @@
 # Config loading and validation, capture-set discovery, input functions.
+import functools
 import json
 import shlex
 import sys
@@ -7,8 +8,13 @@ from snakemake.utils import min_version, validate
 
 from pathlib import Path
 
+import pandas as pd
+
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name
 from denali_pipe.cells import LINEAR, MODELS, SPLITS, TASKS, is_ill_posed
+from denali_pipe.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
+from denali_pipe.experiments.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
+from denali_pipe.geometry import N_LOCATIONS, select_locations
 from denali_pipe.objects import BACKGROUNDS, load_catalogue
 
 min_version("9.0")
@@ -41,6 +47,7 @@ wildcard_constraints:
     res=r"3x3|8x8",
     protocol=r"clean|paper",
     split="|".join(SPLITS),
+    condition=CONDITION_PATTERN,
     model="|".join((*MODELS, LINEAR)),
     task="|".join(TASKS),
     seed=r"\d+",
@@ -149,15 +156,15 @@ def benchmark_sets(res):
 # --- training ----------------------------------------------------------------
 
 TRAIN = config["train"]
-RUN_DIR = "results/runs/{protocol}/{res}/{split}/{model}_{task}/seed{seed}"
+RUN_DIR = "results/runs/{protocol}/{res}/{condition}/{split}/{model}_{task}/seed{seed}"
 
 
 def run_dirs(models, tasks, splits, res=TRAIN["resolution"]):
-    """Cells of the configured protocol and seeds at `res` (default: the
-    tables' resolution); ill-posed (split, task) pairs are never trained
-    (tables report them as n/a)."""
+    """Benchmark cells (condition `all`) of the configured protocol and
+    seeds at `res` (default: the tables' resolution); ill-posed (split,
+    task) pairs are never trained (tables report them as n/a)."""
     return [
-        RUN_DIR.format(protocol=TRAIN["protocol"], res=res, split=sp, model=m, task=t, seed=seed)
+        RUN_DIR.format(protocol=TRAIN["protocol"], res=res, condition=ALL, split=sp, model=m, task=t, seed=seed)
         for m in models for t in tasks for sp in splits for seed in TRAIN["seeds"]
         if not is_ill_posed(sp, t)
     ]  # fmt: skip
@@ -167,8 +174,52 @@ def run_files(models, tasks, splits, name="metrics.json", res=TRAIN["resolution"
     return [f"{d}/{name}" for d in run_dirs(models, tasks, splits, res)]
 
 
+@functools.cache
+def planned_samples(res):
+    """The dataset's sample table at `res` as the config plans it: one row
+    per benchmark set and gantry location (the rig's locations, or the whole
+    grid of a capture tree), the columns conditions.py filters on."""
+    locations = select_locations(config["rig"]["n_locations"]) if config["source"] == "synthetic" else range(N_LOCATIONS)
+    names = set(benchmark_sets(res))
+    rows = [
+        {"class": CATALOGUE[s.object].cls, "type": CATALOGUE[s.object].type, "size": s.size, "light": s.light, "location": k}
+        for s in SETS if s.name in names for k in locations
+    ]  # fmt: skip
+    return pd.DataFrame(rows, columns=["class", "type", "size", "light", "location"])
+
+
+def condition_metrics(task, conditions, resolutions, seeds):
+    """metrics.json of the random-split 1D CNN cells of `task` under each
+    condition, resolution and seed, leaving out those the condition leaves
+    ill-posed on the planned samples (tables report them as n/a)."""
+    return [
+        RUN_DIR.format(protocol=TRAIN["protocol"], res=res, condition=c, split="random", model="cnn1d", task=task, seed=seed) + "/metrics.json"
+        for res in resolutions for c in conditions for seed in seeds
+        if ill_posed(planned_samples(res), task, c) is None
+    ]  # fmt: skip
+
+
+def condition_table_metrics(wildcards):
+    """Table 7, 8 or 9's cells: its task under its baseline and its
+    conditions of `conditions.groups`, at every `conditions.resolutions`."""
+    task, conditions = table_conditions(wildcards.table, config["conditions"]["groups"])
+    files = condition_metrics(task, conditions, config["conditions"]["resolutions"], config["conditions"]["seeds"])
+    if not files:
+        raise ValueError(f"{wildcards.table}: every condition leaves {task} ill-posed on the configured sets (config `objects`, `sizes`, `lightings`)")
+    return files
+
+
+def jitter_metrics(wildcards):
+    """The jitter sweep's cells: every task at every `jitter.fwhm_ps`."""
+    conditions = [jitter_condition(f) for f in config["jitter"]["fwhm_ps"]]
+    files = [f for task in TASKS for f in condition_metrics(task, conditions, [JITTER_RESOLUTION], config["jitter"]["seeds"])]
+    if not files:
+        raise ValueError(f"the jitter sweep needs {JITTER_RESOLUTION} light-on base-object capture sets (config `resolutions`, `lightings`, `objects`)")
+    return files
+
+
 def cell_arg(wildcards):
-    cell = {k: wildcards[k] for k in ("model", "task", "split", "protocol")}
+    cell = {k: wildcards[k] for k in ("model", "task", "split", "condition", "protocol")}
     cell.update(resolution=wildcards.res, seed=int(wildcards.seed))
     return shlex.quote(json.dumps(cell, sort_keys=True))
 

@@ -61,3 +61,18 @@ rule training_curves:
         "logs/report/{fig}.log",
     shell:
         "{DENALI} report {wildcards.fig} {input} --title {params.title} --out {output.png} > {log} 2>&1"
+
+
+rule condition_table:
+    input:
+        condition_table_metrics,
+    output:
+        report("results/{table}.csv", caption="../report/condition_table.rst", category="3. Training"),
+    params:
+        groups=" ".join(config["conditions"]["groups"]),
+    log:
+        "logs/report/{table}.log",
+    wildcard_constraints:
+        table="|".join(CONDITION_TABLES),
+    shell:
+        "{DENALI} report {wildcards.table} {input} --groups {params.groups} --out {output} > {log} 2>&1"

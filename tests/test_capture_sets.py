@@ -126,9 +126,9 @@ def test_expected_sets_tiny_preset(catalogue, demo_config):
     cfg = copy.deepcopy(demo_config)
     cfg.update(yaml.safe_load((REPO / "config" / "presets" / "tiny.yaml").read_text()))
     sets = expected_sets(catalogue, cfg)
-    # 1, A, circle, white 1: 4 objects x 2 sizes x 4 (res, light) + 8 backgrounds
-    assert len(sets) == 4 * 2 * 4 + 8
-    assert {s.object for s in sets} == {"1", "A", "circle", "generalization1white", *BACKGROUNDS}
+    # 1, A, circle, white 1: 4 objects x 2 sizes x 4 (res, light); italic 1 (8 in only) x 4; 8 backgrounds
+    assert len(sets) == 4 * 2 * 4 + 4 + 8
+    assert {s.object for s in sets} == {"1", "A", "circle", "generalization1white", "generalization1italic", *BACKGROUNDS}
 
 
 # --- select_objects, background_of ---------------------------------------------------------

@@ -5,9 +5,14 @@ import pytest
 
 from denali_pipe.cell_metrics import CellMetrics
 from denali_pipe.cells import MODELS, SPLITS, TASKS, Cell, is_ill_posed
-from denali_pipe.report.training_curves import write_training_curves
-from denali_pipe.report.paper import TABLE5, TABLE10
+from denali_pipe.conditions import CONDITION_GROUPS, TABLES
+from denali_pipe.experiments.jitter import jitter_condition, jitter_curve
+from denali_pipe.report.condition_table import condition_table, write_condition_table
+from denali_pipe.report.jitter import plot_jitter
+from denali_pipe.report.paper import CONDITION_TABLES, TABLE5, TABLE10
+from denali_pipe.report.runs import load_runs
 from denali_pipe.report.speed_vs_accuracy import pareto, write_speed_vs_accuracy
+from denali_pipe.report.training_curves import write_training_curves
 from denali_pipe.report.table2 import write_table2
 from denali_pipe.report.table5 import write_table5
 from denali_pipe.report.table10 import write_table10
@@ -16,12 +21,12 @@ REG = {"mse": 0.0025, "rmse": 0.05, "mae": 0.04}
 CLS = {"top1": 0.5, "top5": 0.9, "precision": 0.45, "recall": 0.5, "f1": 0.47}
 
 
-def _write_cell(root, model, task, split, seed, protocol="clean", score=0.0):
-    d = root / protocol / "3x3" / split / f"{model}_{task}" / f"seed{seed}"
+def _write_cell(root, model, task, split, seed, protocol="clean", score=0.0, resolution="3x3", condition="all"):
+    d = root / protocol / resolution / condition / split / f"{model}_{task}" / f"seed{seed}"
     d.mkdir(parents=True)
     test = {k: v + score for k, v in (REG if task == "location" else CLS).items()}
     m = CellMetrics(
-        cell=Cell(model=model, task=task, split=split, resolution="3x3", protocol=protocol, seed=seed),
+        cell=Cell(model=model, task=task, split=split, resolution=resolution, protocol=protocol, seed=seed, condition=condition),
         hyper={"lr": 1e-3, "epochs": 10, "batch_size": 64, "norm": "raw"},
         selected_on="validation", n_train=700, n_validation=140, n_test=300, n_classes=30, input_shape=(3, 3, 57), params=82340,
         best_epoch=7, test=test, baseline={k: v / 2 for k, v in test.items()},
@@ -94,3 +99,55 @@ def test_pareto_front():
     pts = pd.DataFrame({"train_seconds": [1, 10, 100, 5], "metric": [0.1, 0.3, 0.2, 0.05]})
     assert pareto(pts, higher_is_better=True).tolist() == [True, True, False, False]
     assert pareto(pts, higher_is_better=False).tolist() == [True, False, False, True]
+
+
+def test_condition_tables_have_both_resolutions_na_for_untrained_and_the_paper_at_8x8(tmp_path):
+    task, conditions = TABLES["table8"]
+    untrained = "numbers"  # as if the preset had a single number object... of one size
+    paths = [
+        _write_cell(tmp_path, "cnn1d", task, "random", seed, resolution=res, condition=c, score=0.01 * i + (0.1 if res == "3x3" else 0.0)) / "metrics.json"
+        for res in ("8x8", "3x3") for c in conditions if c != untrained for i, seed in enumerate((42, 43))
+    ]  # fmt: skip
+    write_condition_table(paths, "table8", list(CONDITION_GROUPS), tmp_path / "table8.csv")
+    t = pd.read_csv(tmp_path / "table8.csv", keep_default_na=False)
+    assert list(zip(t.resolution, t.condition)) == [(res, c) for res in ("3x3", "8x8") for c in conditions]
+    t = t.set_index(["resolution", "condition"])
+    assert t.loc[("8x8", "all"), "condition_group"] == "baseline" and t.loc[("3x3", "front_quadrant"), "condition_group"] == "location"
+    assert float(t.loc[("3x3", "letters"), "size_accuracy"]) == pytest.approx(0.605)  # mean over seeds of 0.6 and 0.61
+    assert float(t.loc[("3x3", "letters"), "size_accuracy_std"]) == pytest.approx(0.00707, abs=1e-4)
+    assert float(t.loc[("8x8", "letters"), "paper_size_accuracy"]) == CONDITION_TABLES["table8"]["letters"]["size_accuracy"]
+    assert t.loc[("3x3", "letters"), "paper_size_accuracy"] == ""  # published at 8x8 only
+    assert float(t.loc[("8x8", "all"), "trivial_size_accuracy"]) == pytest.approx(0.2525)
+    for res in ("3x3", "8x8"):
+        assert t.loc[(res, untrained), "size_accuracy"] == "n/a" and t.loc[(res, untrained), "n_seeds"] == 0
+    assert (t.drop(untrained, level="condition").n_seeds == 2).all() and (t.protocol == "clean").all()
+    assert not {c for c in t.columns if c.startswith(("loc_", "shape_"))}
+
+
+def test_condition_tables_refuse_other_cells(tmp_path):
+    shape = _write_cell(tmp_path, "cnn1d", "shape", "random", 42) / "metrics.json"
+    with pytest.raises(ValueError, match="table8 shows the cnn1d size cells"):
+        condition_table(load_runs([shape]), "table8", list(CONDITION_GROUPS))
+    size_cell = _write_cell(tmp_path, "cnn1d", "size", "random", 42, condition="8inch") / "metrics.json"
+    with pytest.raises(ValueError, match="table8 has no row for conditions"):
+        condition_table(load_runs([size_cell]), "table8", list(CONDITION_GROUPS))
+    quadrant = _write_cell(tmp_path, "cnn1d", "size", "random", 42, condition="back_quadrant") / "metrics.json"
+    with pytest.raises(ValueError, match=r"no row for conditions \['back_quadrant'\]"):
+        condition_table(load_runs([quadrant]), "table8", ["lighting"])
+
+
+def test_condition_tables_show_the_groups_trained(tmp_path):
+    paths = [_write_cell(tmp_path, "cnn1d", "location", "random", 42, condition=c) / "metrics.json" for c in ("all", "light_on", "light_off")]
+    t = condition_table(load_runs(paths), "table9", ["lighting"])
+    assert list(t.condition) == ["all", "light_on", "light_off"] and (t.n_seeds == 1).all()
+
+
+def test_jitter_figure(tmp_path):
+    paths = [
+        _write_cell(tmp_path, "cnn1d", task, "random", seed, condition=jitter_condition(fwhm), score=fwhm / 1e4 + 0.01 * i) / "metrics.json"
+        for task in TASKS for fwhm in (0, 50, 100, 600) for i, seed in enumerate((42, 43))
+    ]  # fmt: skip
+    plot_jitter(jitter_curve(load_runs(paths)), "jitter", tmp_path / "jitter.png")
+    assert (tmp_path / "jitter.png").stat().st_size > 10_000
+    curve = pd.read_csv(tmp_path / "jitter.csv")
+    assert len(curve) == 8 * 4 and set(curve.task) == set(TASKS)

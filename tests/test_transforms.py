@@ -357,5 +357,5 @@ def test_file_before_checked_fits_still_reads(tmp_path):
     t = Transforms(3.0, 0.9, tuple(np.full(KERNEL_BINS, 1 / KERNEL_BINS)), 1.2, 40.0)
     (tmp_path / "old.json").write_text(json.dumps({**t.to_dict(), "kernel_bins": KERNEL_BINS, "n_pairs": 1}))
     assert read_transforms(tmp_path / "old.json") == t
-    with pytest.raises(ValueError, match="old.json: no 'check' entry .* refit it with `denali fit-transforms`"):
+    with pytest.raises(ValueError, match="old.json: no 'check' entry .* refit it with `denali transforms`"):
         read_fit_check(tmp_path / "old.json")

@@ -9,6 +9,8 @@ import pandas as pd
 import pytest
 
 from denali_pipe.capture_sets import expected_sets
+from denali_pipe.conditions import TABLES as CONDITION_TABLES
+from denali_pipe.conditions import table_conditions
 from denali_pipe.experiments.fig9 import MEAN_BASELINE
 from denali_pipe.geometry import select_locations
 from denali_pipe.io.store import open_set
@@ -104,9 +106,10 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     # the new object: 2 sizes x 2 resolutions x 2 lightings (preprocessed at both: Fig 14 trains at 8x8); twins per object x size
     own = {"rig": 2, "ingest": 8, "poses": 8, "preprocess": 8, "twin": 2}
     aggregates = {"index": 1, "table4": 1, "table6": 1, "detections": 1, "dataset": 2, "render_benchmark": 1, "fig18": 1, "transforms": 1, "fig9": 1, "all": 1}
-    # every training cell reads its dataset; tiny: 1 seed, 13 Table 5 cells + 9 more Table 2 cells + 3 linear + Fig 14's 8x8 shape cell;
+    # every training cell reads its dataset; tiny: 1 seed, 13 Table 5 cells + 9 more Table 2 cells + 3 linear + Fig 14's 8x8 shape cell,
+    # 10 conditioned cells of Tables 7-9 (their baselines are Table 5's) and 3 of the jitter sweep
+    training = {"train": 39, "table5": 1, "table2": 1, "table10": 1, "training_curves": 2, "speed_vs_accuracy": 1, "condition_table": 3, "jitter": 1}
     # the variant datasets stay, but the retrained cells are scored on them again (5 evaluations)
-    training = {"train": 26, "table5": 1, "table2": 1, "table10": 1, "training_curves": 2, "speed_vs_accuracy": 1}
     experiments = {"evaluate": 5, "fig10": 1, "fig11": 1, "tsne": 2}
     expected = {**own, **aggregates, **training, **experiments}
     assert jobs == {**expected, "total": sum(expected.values())}
@@ -206,12 +209,42 @@ def test_training_tables_and_figures(tiny_run):
     assert len(t10) == 12 and (t10["train_hours"] > 0).all()
     for fig in ("fig16", "fig17", "speed_vs_accuracy"):
         assert (tiny_run / f"results/{fig}.png").stat().st_size > 10_000 and (tiny_run / f"results/{fig}.csv").exists()
-    run = tiny_run / "results/runs/clean/3x3/random/cnn1d_location/seed42"
+    run = tiny_run / "results/runs/clean/3x3/all/random/cnn1d_location/seed42"
     assert {p.name for p in run.iterdir()} == {"metrics.json", "curves.csv", "model.pt"}
     m = json.loads((run / "metrics.json").read_text())
-    assert m["cell"]["protocol"] == "clean" and m["selected_on"] == "validation" and m["train_samples_per_second"] > 0
+    assert m["cell"]["protocol"] == "clean" and m["cell"]["condition"] == "all"
+    assert m["selected_on"] == "validation" and m["train_samples_per_second"] > 0
     crop = json.loads((tiny_run / "results/features/crop_3x3.json").read_text())["crop_start"]
     assert m["input_shape"] == [3, 3, 128 - crop]
+
+
+def test_condition_tables(tiny_run):
+    t5 = pd.read_csv(tiny_run / "results/table5.csv").set_index("split")
+    for name in CONDITION_TABLES:
+        task, conditions = table_conditions(name, ["object_type", "location"])
+        t = pd.read_csv(tiny_run / f"results/{name}.csv", keep_default_na=False)
+        # tiny: 3x3 only, one seed, two groups; every condition has two classes of each task (1, A, circle at both sizes)
+        assert list(t.condition) == conditions and set(t.resolution) == {"3x3"} and (t.n_seeds == 1).all()
+        assert (t.condition_group.iloc[1:] != "baseline").all() and set(t.protocol) == {"clean"}
+        assert (t.filter(like="paper_") == "").all().all()  # the paper published 8x8 only
+        base = t.set_index("condition").loc["all"]
+        assert (t.n_train.iloc[1:] < base.n_train).all()  # a condition keeps part of the samples
+        headline = {"shape": "shape_top1", "size": "size_accuracy", "location": "loc_rmse"}[task]
+        assert float(base[headline]) == pytest.approx(float(t5.loc["random", headline]), abs=1e-4)  # Table 5's cells
+    cell = json.loads((tiny_run / "results/runs/clean/3x3/front_quadrant/random/cnn1d_shape/seed42/metrics.json").read_text())
+    # tiny's 12 locations put 3 in each quadrant: 3 objects x 2 sizes x 2 lightings x 3 repeats each
+    assert cell["cell"]["condition"] == "front_quadrant" and cell["n_train"] + cell["n_validation"] + cell["n_test"] == 3 * 3 * 2 * 2 * 3
+
+
+def test_jitter_sweep(tiny_run):
+    curve = pd.read_csv(tiny_run / "results/jitter.csv")
+    assert set(curve.fwhm_ps) == {100} and set(curve.task) == {"location", "shape", "size"} and len(curve) == 8
+    assert (curve.n_seeds == 1).all() and curve.trivial.notna().all()
+    assert (tiny_run / "results/jitter.png").stat().st_size > 10_000
+    crop = json.loads((tiny_run / "results/features/crop_3x3.json").read_text())["crop_start"]
+    cell = json.loads((tiny_run / "results/runs/clean/3x3/jitter100ps/random/cnn1d_size/seed42/metrics.json").read_text())
+    # the light-on half of the samples, the centre zone only
+    assert cell["input_shape"] == [1, 1, 128 - crop] and cell["n_train"] + cell["n_validation"] + cell["n_test"] == 3 * 2 * 12 * 3
 
 
 def test_changing_one_models_hyperparameters_reruns_only_its_cells_and_tables(tiny_run, tmp_path):
@@ -224,7 +257,7 @@ def test_changing_one_models_hyperparameters_reruns_only_its_cells_and_tables(ti
 
 
 def test_training_cells_request_the_configured_gpus(tiny_run, tmp_path):
-    cell = "results/runs/clean/3x3/random/cnn1d_location/seed42/metrics.json"
+    cell = "results/runs/clean/3x3/all/random/cnn1d_location/seed42/metrics.json"
     cfg = tmp_path / "gpu.yaml"
     cfg.write_text("train:\n  gpus: 1\n")
     for extra, gpus in (((), 0), ((str(cfg),), 1)):
@@ -293,7 +326,7 @@ def test_variant_datasets_and_the_cells_scored_on_them(tiny_run):
         samples = pd.read_parquet(tiny_run / f"results/datasets/{variant}_3x3.parquet")
         assert set(samples["object"]) == objects and set(samples["class"]) == {"1"}
         for task in ("location", "shape", "size") if variant == "nonrr" else ("location", "shape"):
-            e = json.loads((tiny_run / f"results/evaluations/{variant}_3x3/clean/3x3/random/cnn1d_{task}/seed42.json").read_text())
+            e = json.loads((tiny_run / f"results/evaluations/{variant}_3x3/clean/3x3/all/random/cnn1d_{task}/seed42.json").read_text())
             assert e["n_samples"] == len(samples) and e["cell"]["task"] == task and e["metrics"] and e["baseline"]
 
 
@@ -321,7 +354,7 @@ def test_tsne_figures_at_both_resolutions(tiny_run):
         assert 0 <= mean["knn_accuracy"] <= 1 and -1 <= mean["silhouette"] <= 1
         assert (table["row"] == "point").sum() == table.loc[table["row"] == "seed", "n_samples"].sum() > 0
         assert (tiny_run / f"results/{fig}.png").stat().st_size > 10_000
-    m = json.loads((tiny_run / "results/runs/clean/8x8/random/cnn1d_shape/seed42/metrics.json").read_text())
+    m = json.loads((tiny_run / "results/runs/clean/8x8/all/random/cnn1d_shape/seed42/metrics.json").read_text())
     assert m["input_shape"][:2] == [8, 8]
 
 
@@ -331,7 +364,7 @@ def test_tsne_figures_at_both_resolutions(tiny_run):
 REPORTED = (
     "rig_examples.png", "rig_vs_real.png", "table4.csv", "table6.csv", "fig12.png", "detections.csv", "table5.csv", "table2.csv", "table10.csv",
     "fig16.png", "fig17.png", "speed_vs_accuracy.png", "render_benchmark.png", "fig18.png", "transforms.json", "fig9.png",
-    "fig10.png", "fig11.png", "fig13.png", "fig14.png",
+    "fig10.png", "fig11.png", "fig13.png", "fig14.png", "table7.csv", "table8.csv", "table9.csv", "jitter.png",
 )  # fmt: skip
 
 
@@ -344,7 +377,8 @@ def test_report_has_every_table_and_figure_with_its_caption(tiny_run):
     html = (tiny_run / "results/report.html").read_text()
     # every caption names the preset; the training ones name the protocol
     assert html.count('Preset <tt class=\\"docutils literal\\">tiny</tt>') == len(REPORTED)
-    assert html.count('protocol <tt class=\\"docutils literal\\">clean</tt>') + html.count('Protocol <tt class=\\"docutils literal\\">clean</tt>') >= 6
-    for title in ("Table 5: the 1D CNN under five train/test splits", "Figure 16: 1D CNN localisation", "Figure 17: 1D CNN shape", "Figure 9: localisation RMSE",
-                  "Figure 10: non-retroreflective objects", "Figure 11: the italic", "Figure 13: 3x3", "Figure 14: 8x8"):  # fmt: skip
+    assert html.count('protocol <tt class=\\"docutils literal\\">clean</tt>') + html.count('Protocol <tt class=\\"docutils literal\\">clean</tt>') >= 10
+    titles = ("Table 5: the 1D CNN under five train/test splits", "Figure 16: 1D CNN localisation", "Figure 17: 1D CNN shape", "Figure 9: localisation RMSE")
+    experiments = ("Figure 10: non-retroreflective objects", "Figure 11: the italic", "Figure 13: 3x3", "Figure 14: 8x8")
+    for title in (*titles, *experiments, "Table 7: shape classification", "Table 8: size classification", "Table 9: localisation RMSE", "Timing-jitter sweep"):
         assert title in html

@@ -10,6 +10,8 @@ LINEAR = "linear"  # the classical reference model (classical.py)
 TASKS = ("location", "shape", "size")
 SPLITS = ("random", "repeats_grouped", "location_held_out", "shape_held_out", "size_held_out")
 PROTOCOLS = ("clean", "paper")
+# The condition of a cell that trains and tests on every sample (conditions.py has the others).
+ALL = "all"
 
 # A classifier cannot name shapes (sizes) it never saw in training.
 ILL_POSED = {("shape_held_out", "shape"), ("size_held_out", "size")}
@@ -23,7 +25,8 @@ def is_ill_posed(split: str, task: str) -> bool:
 @dataclass(frozen=True)
 class Cell:
     """One training cell: `model` learns `task` on the `split` of the
-    benchmark's samples at `resolution`, under `protocol`, with `seed`."""
+    benchmark's samples at `resolution` that meet `condition`
+    (conditions.py), under `protocol`, with `seed`."""
 
     model: str
     task: str
@@ -31,3 +34,4 @@ class Cell:
     resolution: str
     protocol: str
     seed: int
+    condition: str = ALL

@@ -67,6 +67,8 @@ def cmd_index(args: argparse.Namespace) -> None:
 
 
 def cmd_training_report(args: argparse.Namespace) -> None:
+    from denali_pipe.conditions import TABLES
+    from denali_pipe.report.condition_table import write_condition_table
     from denali_pipe.report.speed_vs_accuracy import write_speed_vs_accuracy
     from denali_pipe.report.table2 import write_table2
     from denali_pipe.report.table5 import write_table5
@@ -82,6 +84,8 @@ def cmd_training_report(args: argparse.Namespace) -> None:
         write_table10(paths, out)
     elif args.kind == "speed-vs-accuracy":
         write_speed_vs_accuracy(paths, out)
+    elif args.kind in TABLES:
+        write_condition_table(paths, args.kind, args.groups, out)
     else:
         task = {"fig16": "location", "fig17": "shape"}[args.kind]
         write_training_curves(paths, task, args.title, out)
@@ -202,14 +206,21 @@ def cmd_train(args: argparse.Namespace) -> None:
     from denali_pipe.atomic import atomic_dir
     from denali_pipe.cell_metrics import METRICS_FILE
     from denali_pipe.cells import LINEAR, Cell
-    from denali_pipe.classical import run_linear
+    from denali_pipe.conditions import condition_view
     from denali_pipe.dataset import read_dataset
     from denali_pipe.train import Hyper, run_cell
 
     torch.set_num_threads(args.threads)
-    x, samples, _ = read_dataset(Path(args.dataset), Path(args.table))
     cell = Cell(**args.cell)
+    x, samples, _ = read_dataset(Path(args.dataset), Path(args.table))
+    try:
+        x, samples = condition_view(x, samples, cell.task, cell.condition)
+    except ValueError as e:
+        raise ValueError(f"{args.table}: {e}") from None
     if cell.model == LINEAR:
+        # imported here: scikit-learn costs every neural cell's job ~1.5 CPU-s to import
+        from denali_pipe.classical import run_linear
+
         result = run_linear(x, samples, cell, args.validation_fraction)
     else:
         device = "cuda" if torch.cuda.is_available() else "cpu"
@@ -375,6 +386,16 @@ def cmd_tsne(args: argparse.Namespace) -> None:
     table = run_tsne([Path(d) for d in args.runs], x, samples, args.seed)
     write_tsne(table, args.title, Path(args.out))
     log.info("wrote %s and its CSV:\n%s", args.out, table[table["row"] != "point"].dropna(axis=1, how="all").to_string(index=False))
+def cmd_jitter(args: argparse.Namespace) -> None:
+    from denali_pipe.experiments.jitter import jitter_curve
+    from denali_pipe.report.jitter import plot_jitter
+    from denali_pipe.report.runs import load_runs, protocol_of
+
+    runs = load_runs([Path(p) for p in args.runs])
+    curve = jitter_curve(runs)
+    title = f"1D CNN on the 3x3 centre zone, lights on, against timing jitter (random split, {protocol_of(runs)} protocol)"
+    plot_jitter(curve, title, Path(args.out))
+    log.info("wrote %s and its CSV from %d cells:\n%s", args.out, len(runs), curve.to_string(index=False))
 
 
 def cmd_rig_examples(args: argparse.Namespace) -> None:
@@ -396,6 +417,9 @@ def cmd_rig_vs_real(args: argparse.Namespace) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from denali_pipe.conditions import CONDITION_GROUPS
+    from denali_pipe.conditions import TABLES as CONDITION_TABLES
+
     p = argparse.ArgumentParser(prog="denali", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="verb", required=True)
 
@@ -419,9 +443,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_index)
 
     s = sub.add_parser("report", help="a training table or figure from cells' metrics.json / curves.csv")
-    s.add_argument("kind", choices=["table2", "table5", "table10", "fig16", "fig17", "speed-vs-accuracy"])
+    s.add_argument("kind", choices=["table2", "table5", *CONDITION_TABLES, "table10", "fig16", "fig17", "speed-vs-accuracy"])
     s.add_argument("runs", nargs="+", help="metrics.json files (curves.csv for fig16/fig17)")
     s.add_argument("--title", default="", help="figure title (fig16/fig17)")
+    s.add_argument("--groups", nargs="+", choices=CONDITION_GROUPS, default=list(CONDITION_GROUPS), help="condition groups trained (tables 7-9; default: all)")
     s.add_argument("--out", required=True, help="output CSV or PNG (a PNG gets its data beside it as CSV)")
     s.set_defaults(func=cmd_training_report)
 
@@ -473,10 +498,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--table", required=True, help="output datasets/<res>.parquet (one row per sample)")
     s.set_defaults(func=cmd_dataset)
 
-    s = sub.add_parser("train", help="train and evaluate one cell (model x task x split x resolution x protocol x seed)")
+    s = sub.add_parser("train", help="train and evaluate one cell (model x task x split x resolution x condition x protocol x seed)")
     s.add_argument("dataset", help="datasets/<res>.zarr")
     s.add_argument("--table", required=True, help="datasets/<res>.parquet")
-    s.add_argument("--cell", type=_json, required=True, help='JSON {"model", "task", "split", "resolution", "protocol", "seed"}')
+    s.add_argument("--cell", type=_json, required=True, help='JSON {"model", "task", "split", "resolution", "condition", "protocol", "seed"}')
     s.add_argument("--hyper", type=_json, required=True, help='JSON {"lr", "epochs", "batch_size", "norm"} ({} for the linear model)')
     s.add_argument("--validation-fraction", type=float, required=True, help="validation share of the training split (clean protocol)")
     s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
@@ -555,6 +580,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
     s.set_defaults(func=cmd_tsne)
+    s = sub.add_parser("jitter", help="the timing-jitter sweep: each task's metrics against the jitter's FWHM, from its cells")
+    s.add_argument("runs", nargs="+", help="metrics.json of the jitter<FWHM>ps cells")
+    s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
+    s.set_defaults(func=cmd_jitter)
 
     s = sub.add_parser("rig-examples", help="plot example histograms with the three-bounce bump marked")
     s.add_argument("--sets", nargs="+", required=True, help="object capture-set stores (<set>.zarr)")

@@ -29,6 +29,8 @@ import numpy as np
 
 N_BINS = 128
 BIN_WIDTH_OPL = 3.0 / 128  # m of optical path per bin (78 ps)
+SPEED_OF_LIGHT = 299_792_458.0  # m/s
+BIN_WIDTH_PS = BIN_WIDTH_OPL / SPEED_OF_LIGHT * 1e12  # a bin's time, ps (78.2)
 HIST_START_OPL = 0.0  # sensor-relative OPL at the left edge of bin 0, m
 
 

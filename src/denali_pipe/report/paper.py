@@ -76,3 +76,42 @@ REAL_CENTRE_ZONE = {
     "teaser.png": {"floor_before": 225.0, "bump_excess": 500.0, "bump_over_floor": 2.2, "late_over_floor": 0.25, "bump_fwhm": 4.5},
     "digital_twin.png": {"floor_fraction": 0.02, "bump_fraction": 0.04},
 }
+
+# Tables 7-9: the 1D CNN at 8x8 trained and tested within a condition
+# (conditions.py names them; `all` is the paper's "no conditioning" row).
+_TABLE7_ROWS = {
+    "all": (0.0875, 0.3255, 0.0683),
+    "8inch": (0.1083, 0.4059, 0.0914),
+    "4inch": (0.1104, 0.3978, 0.0945),
+    "light_on": (0.1372, 0.4637, 0.0953),
+    "light_off": (0.0476, 0.2185, 0.0090),
+    "front_quadrant": (0.0756, 0.2956, 0.0380),
+    "back_quadrant": (0.0715, 0.2974, 0.0284),
+}
+_TABLE8_ROWS = {
+    "all": (0.5372, 0.5371, 0.5371),
+    "letters": (0.5647, 0.5647, 0.5647),
+    "numbers": (0.5917, 0.5917, 0.5917),
+    "shapes": (0.5695, 0.5661, 0.5661),
+    "light_on": (0.5315, 0.5302, 0.5302),
+    "light_off": (0.5526, 0.5524, 0.5524),
+    "front_quadrant": (0.5219, 0.5215, 0.5215),
+    "back_quadrant": (0.5535, 0.5530, 0.5530),
+}
+_TABLE9_ROWS = {
+    "all": (0.1039, 0.0899),
+    "letters": (0.1043, 0.0899),
+    "numbers": (0.1045, 0.0905),
+    "shapes": (0.1047, 0.0905),
+    "light_on": (0.1054, 0.0914),
+    "light_off": (0.1058, 0.0907),
+    "8inch": (0.1046, 0.0902),
+    "4inch": (0.1051, 0.0913),
+}
+CONDITION_TABLES = {
+    "table7": {c: dict(zip(("shape_top1", "shape_top5", "shape_f1"), row)) for c, row in _TABLE7_ROWS.items()},
+    "table8": {c: dict(zip(("size_precision", "size_recall", "size_accuracy"), row)) for c, row in _TABLE8_ROWS.items()},
+    "table9": {c: dict(zip(("loc_rmse", "loc_mae"), row)) for c, row in _TABLE9_ROWS.items()},
+}
+# The resolution Tables 7-9 were published at.
+CONDITION_TABLES_RESOLUTION = "8x8"

@@ -1,0 +1,62 @@
+"""Tables 7-9: the 1D CNN trained and tested within a condition (size,
+lighting, object type, gantry quadrant: conditions.py), one task per table,
+at every resolution trained, beside the paper's numbers (published at 8x8
+only, so the 3x3 rows have none)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from denali_pipe.atomic import atomic_file
+from denali_pipe.conditions import GROUP_OF, table_conditions
+from denali_pipe.geometry import RESOLUTIONS
+from denali_pipe.report.paper import CONDITION_TABLES, CONDITION_TABLES_RESOLUTION
+from denali_pipe.report.runs import METRICS, NA, load_runs, protocol_of, seed_stats
+
+MODEL = "cnn1d"
+
+
+def condition_table(runs: pd.DataFrame, table: str, groups: list[str]) -> pd.DataFrame:
+    """One row per resolution (of those trained) and condition of `table`
+    in its baseline and `groups` (conditions.table_conditions):
+    each of the task's metrics with _std over seeds, the paper's value
+    (`paper_`) and the trivial predictor's (`trivial_`: training mean
+    position or majority class), then the mean training and test sizes and
+    n_seeds. A condition without cells (ill-posed there) reads n/a."""
+    task, conditions = table_conditions(table, groups)
+    wrong = sorted({(m, t) for m, t in zip(runs["model"], runs["task"])} - {(MODEL, task)})
+    if wrong:
+        raise ValueError(f"{table} shows the {MODEL} {task} cells; got {wrong}")
+    unknown = sorted(set(runs["condition"]) - set(conditions))
+    if unknown:
+        raise ValueError(f"{table} has no row for conditions {unknown}; its rows are {list(conditions)}")
+    names = [name for name, (t, _) in METRICS.items() if t == task]
+    columns = [f"{kind}_{METRICS[n][1]}" for n in names for kind in ("test", "baseline")] + ["n_train", "n_test"]
+    stats = seed_stats(runs, ["resolution", "condition"], columns).set_index(["resolution", "condition"])
+    paper = CONDITION_TABLES[table]
+    protocol = protocol_of(runs)
+    rows = []
+    for res in [r for r in RESOLUTIONS if r in set(runs["resolution"])]:
+        for condition in conditions:
+            row = {"resolution": res, "condition_group": GROUP_OF[condition], "condition": condition, "protocol": protocol}
+            trained = (res, condition) in stats.index
+            s = stats.loc[(res, condition)] if trained else None
+            for name in names:
+                metric = METRICS[name][1]
+                row[name] = round(float(s[f"test_{metric}"]), 4) if trained else NA
+                row[f"{name}_std"] = round(float(s[f"test_{metric}_std"]), 4) if trained else NA
+                row[f"paper_{name}"] = paper[condition][name] if res == CONDITION_TABLES_RESOLUTION else ""
+                row[f"trivial_{name}"] = round(float(s[f"baseline_{metric}"]), 4) if trained else NA
+            row["n_train"] = int(round(s["n_train"])) if trained else 0
+            row["n_test"] = int(round(s["n_test"])) if trained else 0
+            row["n_seeds"] = int(s["n_seeds"]) if trained else 0
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def write_condition_table(metrics_paths: list[Path], table: str, groups: list[str], out: Path) -> None:
+    frame = condition_table(load_runs(metrics_paths), table, groups)
+    with atomic_file(out) as tmp:
+        frame.to_csv(tmp, index=False)

@@ -1,0 +1,40 @@
+"""The timing-jitter sweep's figure: each task's metrics against the jitter's
+FWHM (ps), mean +- std over seeds, the trivial predictor dashed."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from denali_pipe.geometry import BIN_WIDTH_PS
+from denali_pipe.report.figure import plt, save_figure
+
+TASK_TITLES = {"location": "location (lower is better)", "shape": "shape (higher is better)", "size": "size (higher is better)"}
+Y_LABELS = {"location": "test error (m)", "shape": "test score", "size": "test score"}
+COLOURS = ("tab:blue", "tab:orange", "tab:green")
+
+
+def plot_jitter(curve: pd.DataFrame, title: str, png: Path) -> None:
+    """`experiments.jitter.jitter_curve`'s table as one panel per task; the
+    table goes beside the PNG as CSV."""
+    tasks = [t for t in TASK_TITLES if t in set(curve["task"])]
+    fig, axes = plt.subplots(1, len(tasks), figsize=(4.2 * len(tasks), 3.6), squeeze=False)
+    for ax, task in zip(axes[0], tasks):
+        sub = curve[curve["task"] == task]
+        for colour, (metric, m) in zip(COLOURS, sub.groupby("metric", sort=False)):
+            label = metric.split("_", 1)[1]
+            ax.errorbar(m["fwhm_ps"], m["mean"], yerr=m["std"], marker="o", ms=4, capsize=3, color=colour, label=label)
+            ax.axhline(m["trivial"].mean(), color=colour, ls="--", lw=1)
+        original = sub[sub["fwhm_ps"] == 0]
+        ax.plot(original["fwhm_ps"], original["mean"], "k*", ms=10, zorder=5, label="unjittered" if len(original) else None)
+        ax.set_title(TASK_TITLES[task], fontsize=9)
+        ax.set_xlabel("timing jitter FWHM (ps)")
+        ax.set_ylabel(Y_LABELS[task])
+        top = ax.secondary_xaxis("top", functions=(lambda ps: ps / BIN_WIDTH_PS, lambda b: b * BIN_WIDTH_PS))
+        top.set_xlabel(f"FWHM (bins of {BIN_WIDTH_PS:.0f} ps)", fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, title="dashed: trivial predictor", title_fontsize=7)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, png, curve)
