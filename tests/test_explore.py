@@ -130,3 +130,10 @@ def test_the_histogram_grid_is_a_valid_figure_with_a_subplot_per_zone(n):
     last = fig.data[-2]  # the bottom-right zone's capture, on its own axes
     assert (last.xaxis, last.yaxis) == (f"x{n * n}", f"y{n * n}") and np.array_equal(last.y, counts[-1, -1])
     assert fig.layout[f"yaxis{n * n}"].type == "log" and fig.layout[f"xaxis{n * n}"].domain[1] == 1.0
+
+
+def test_denali_explore_serves_results_on_localhost_8050_by_default():
+    from denali_pipe.cli import build_parser, cmd_explore
+
+    args = build_parser().parse_args(["explore"])
+    assert (args.func, args.results, args.host, args.port) == (cmd_explore, "results", "127.0.0.1", 8050)

@@ -142,7 +142,8 @@ def _panel(id_: str) -> dcc.Graph:
     return dcc.Graph(id=id_, style=PANEL_STYLE, config={"displaylogo": False})
 
 
-READOUT = ("location", "shape", "size")
+READOUT = ("location", "shape", "size")  # the readout table's rows
+PANELS = ("frame", "histograms", "centre", "shape", "size-bars", "grid")  # the graphs, in the page's order
 
 
 def layout(root: Path) -> html.Div:
@@ -156,7 +157,7 @@ def layout(root: Path) -> html.Div:
             html.H3(f"DENALI capture explorer: {root}"),
             banner(inv.missing()),
             html.Div([
-                _labelled("object", dcc.Dropdown(id="object", options=options, value=first, clearable=False, style={"width": "260px"})),
+                _labelled("object", dcc.Dropdown(id="object", options=options, value=first, clearable=False, style={"width": "320px"})),
                 _labelled("size", _radio("size", tuple(SIZES), START["size"])),
                 _labelled("resolution", _radio("resolution", tuple(geo.RESOLUTIONS), START["resolution"])),
                 _labelled("lighting", _radio("light", LIGHTINGS, START["light"])),
@@ -184,7 +185,7 @@ def layout(root: Path) -> html.Div:
                 *[html.Tr([html.Th(task), html.Td(id=f"truth-{task}"), html.Td(id=f"pred-{task}"), html.Td(id=f"note-{task}")]) for task in READOUT],
             ], style={"margin": "6px 0", "fontSize": "14px"}),
             html.Div(
-                [_panel(p) for p in ("frame", "histograms", "centre", "shape", "size-bars", "grid")],
+                [_panel(p) for p in PANELS],
                 style={"display": "grid", "gridTemplateColumns": "repeat(3, minmax(0, 1fr))", "gap": "6px"},
             ),
         ],  # fmt: skip
@@ -210,6 +211,7 @@ class Outputs:
 
 
 def cell_outputs(inv: Inventory, sel: Selection, choice: CellChoice | None) -> Outputs:
+    """The choice's location, shape and size cells on the selected repeat's features."""
     res = sel.cs.resolution
     if sel.cs.is_background:
         return Outputs.none(Missing("a background set: nothing to predict", ""))
@@ -366,8 +368,6 @@ def messages(items: list[Missing]) -> list:
 
 # --- the app ----------------------------------------------------------------------------------
 
-
-PANELS = ("frame", "histograms", "centre", "shape", "size-bars", "grid")
 
 
 def build_app(root: Path) -> Dash:

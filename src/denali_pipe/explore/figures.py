@@ -58,6 +58,11 @@ def frame_figure(rgb: np.ndarray, truth_uv: np.ndarray | None, predicted_uv: np.
     return fig
 
 
+def _suffix(k: int) -> str:
+    """Plotly's name suffix of the k-th subplot's axes (from 1): x, y, then x2, y2, ..."""
+    return "" if k == 1 else str(k)
+
+
 @functools.cache
 def _template(name: str) -> dict:
     return pio.templates[name].to_plotly_json()
@@ -75,15 +80,16 @@ def histogram_grid(counts: np.ndarray, background: np.ndarray | None, zone_start
     width = (1 - gap * (n - 1)) / n
     b = np.arange(bins)
     data, shapes = [], []
-    # a log axis labels every decade only (dtick 1): 2 and 5 between them do not fit an 8x8 grid's subplots
     layout = dict(template=_template(template), title=heading, margin=MARGIN, showlegend=True, legend=dict(orientation="h", y=-0.14, yanchor="top"))
     for r in range(n):
         for c in range(n):
             first = r == 0 and c == 0
-            k = "" if first else str(r * n + c + 1)
+            k = _suffix(r * n + c + 1)
             x0, y1 = c * (width + gap), 1 - r * (width + gap)
             layout[f"xaxis{k}"] = dict(domain=[x0, min(x0 + width, 1.0)], anchor=f"y{k}", showticklabels=r == n - 1, **({} if first else {"matches": "x"}))
-            layout[f"yaxis{k}"] = dict(domain=[max(y1 - width, 0.0), y1], anchor=f"x{k}", type="log" if log_y else "linear", showticklabels=c == 0, **({"dtick": 1} if log_y else {}), **({} if first else {"matches": "y"}))
+            layout[f"yaxis{k}"] = dict(domain=[max(y1 - width, 0.0), y1], anchor=f"x{k}", showticklabels=c == 0, **({} if first else {"matches": "y"}))
+            # a log axis labels whole decades only: 2 and 5 between them do not fit an 8x8 grid's subplots
+            layout[f"yaxis{k}"].update(dict(type="log", dtick=1) if log_y else dict(type="linear"))
             axes = dict(xaxis=f"x{k}", yaxis=f"y{k}")
             data.append(dict(type="scatter", x=b, y=counts[r, c], name="capture", legendgroup="capture", showlegend=first, line=dict(color=MEASURED, width=1), **axes))
             if background is not None:
@@ -91,10 +97,8 @@ def histogram_grid(counts: np.ndarray, background: np.ndarray | None, zone_start
             if zone_starts is not None:
                 start = int(zone_starts[r, c])
                 shapes.append(dict(type="line", xref=f"x{k}", yref=f"y{k} domain", x0=start, x1=start, y0=0, y1=1, line=dict(color=TWIN, width=1, dash="dash")))
-    middle = str((n - 1) * n + (n + 1) // 2)  # the bottom row's middle subplot
-    layout[f"xaxis{middle}"]["title"] = dict(text=BIN_AXIS)
-    left = "" if n == 1 else str(((n + 1) // 2 - 1) * n + 1)  # the left column's middle subplot
-    layout[f"yaxis{left}"]["title"] = dict(text=f"counts{' (log)' if log_y else ''}")
+    layout[f"xaxis{_suffix((n - 1) * n + (n + 1) // 2)}"]["title"] = dict(text=BIN_AXIS)  # the bottom row's middle subplot
+    layout[f"yaxis{_suffix(((n + 1) // 2 - 1) * n + 1)}"]["title"] = dict(text=f"counts{' (log)' if log_y else ''}")  # the left column's middle one
     layout["shapes"] = shapes
     return dict(data=data, layout=layout)
 
@@ -163,7 +167,7 @@ def grid_figure(
         fig.add_trace(go.Scatter(
             x=hit["x"], y=hit["y"], customdata=np.column_stack([hit["location"], e["value"], e["n"]]).tolist(), mode="markers", name="test error",
             marker=dict(color=e["value"], colorscale="Viridis", size=14, symbol="square", colorbar=dict(title=error_label, thickness=12)),
-            hovertemplate="location %{customdata[0]}: %{customdata[1]:.1f} over %{customdata[2]} test samples<extra></extra>",
+            hovertemplate=f"location %{{customdata[0]}}: {error_label} %{{customdata[1]:.1f}}, %{{customdata[2]}} test samples<extra></extra>",
         ))  # fmt: skip
     if truth_xy is not None:
         fig.add_trace(go.Scatter(x=[truth_xy[0]], y=[truth_xy[1]], customdata=[location], mode="markers", name=f"ground truth (location {location})", marker=dict(color=TRUTH, size=22, symbol="circle-open", line=dict(width=3))))
