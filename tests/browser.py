@@ -139,3 +139,20 @@ def figure(driver, graph_id: str) -> dict:
 
 def text(driver, element_id: str) -> str:
     return driver.execute_script("const e = document.getElementById(arguments[0]); return e ? e.innerText : null;", element_id)
+
+
+PANELS = ("frame", "histograms", "centre", "shape", "size-bars", "grid")  # the page's graphs
+# Before a control change: the browser's clock, and a one-time listener on
+# each graph for Plotly's event at the end of a redraw.
+ARM_REDRAWN_JS = """
+window._armed = performance.now(); window._redrawn = {};
+for (const id of arguments[0]) {
+  document.querySelector('#' + id + ' .js-plotly-plot').once('plotly_afterplot', () => { window._redrawn[id] = performance.now(); });
+}
+"""
+# After it: milliseconds from the change to the last graph redrawn, once every one has been.
+REDRAWN_JS = """
+const done = arguments[0].map(id => window._redrawn[id]);
+return done.every(t => t !== undefined) ? Math.max(...done) - window._armed : null;
+"""
+
