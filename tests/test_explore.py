@@ -4,8 +4,6 @@ per-location test error; and, in a real browser, the page over an empty
 results folder (the full page is tested on the tiny run's outputs in
 test_workflow_tiny.py)."""
 
-import json
-
 import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
@@ -94,11 +92,11 @@ def test_the_per_location_test_error_recombines_to_the_cells_test_metric(tmp_pat
     choice = CellChoice(cell.protocol, cell.resolution, cell.split, cell.model, cell.seed)
     run = results / choice.run_path(task)
     run.mkdir(parents=True)
-    (run / "metrics.json").write_text(json.dumps(result.metrics))
+    (run / "metrics.json").write_text(result.metrics.to_json())
     torch.save(result.state, run / "model.pt")
     error = error_by_location(scan(results), choice, task)
-    test = result.metrics["test"]
-    assert error["n"].sum() == result.metrics["n_test"]
+    test = result.metrics.test
+    assert error["n"].sum() == result.metrics.n_test
     if task == "location":  # RMS distances, cm
         assert np.sqrt((error["n"] * error["value"] ** 2).sum() / error["n"].sum()) / 100 == pytest.approx(test["rmse_euclidean"], rel=1e-5)
     else:  # shares classified right, %

@@ -8,7 +8,6 @@ draws again from the cell (split, seed) and the sample table.
 
 from __future__ import annotations
 
-import json
 from functools import lru_cache
 from pathlib import Path
 
@@ -16,7 +15,8 @@ import numpy as np
 import pandas as pd
 
 from denali_pipe.dataset import read_dataset
-from denali_pipe.evaluate import METRICS_FILE, MODEL_FILE, TrainedCell, load_cell, predict, score
+from denali_pipe.cell_metrics import METRICS_FILE, CellMetrics
+from denali_pipe.evaluate import MODEL_FILE, TrainedCell, load_cell, predict, score
 from denali_pipe.explore.outputs import CellChoice, Inventory, dataset_paths
 from denali_pipe.train import partition, targets
 
@@ -63,12 +63,8 @@ def _dataset(x_path: Path, table_path: Path, _stamps: tuple[int, int]) -> tuple[
 def _error_by_location(run_dir: Path, x_path: Path, table_path: Path, _stamps: tuple[int, int, int]) -> pd.DataFrame:
     trained = _cell(run_dir, _stamps[0])
     x, samples = _dataset(x_path, table_path, _stamps[1:])
-    try:
-        validation_fraction = json.loads((run_dir / METRICS_FILE).read_text())["validation_fraction"]
-    except (OSError, ValueError, KeyError) as e:
-        raise ValueError(f"{run_dir / METRICS_FILE}: no validation fraction ({type(e).__name__}: {e})") from None
     y, _ = targets(samples, trained.cell.task)
-    test = partition(samples, y, trained.cell, validation_fraction)[0].test
+    test = partition(samples, y, trained.cell, CellMetrics.read(run_dir / METRICS_FILE).validation_fraction)[0].test
     metric = ERROR_METRIC[trained.cell.task][0]
     rows = []
     for location, idx in samples.iloc[test].groupby("location").indices.items():
