@@ -11,7 +11,7 @@ CORES ?= all
 # project through the interpreter that runs snakemake).
 export PATH := $(abspath $(BIN)):$(PATH)
 
-.PHONY: run test setup debs
+.PHONY: run test explore setup debs
 
 # The headline target: Table 5 (the 1D CNN under five splits) on the demo preset.
 run: setup
@@ -22,6 +22,13 @@ run: setup
 # other and with the unit tests (tests/conftest.py collects them first).
 test: setup
 	python -m pytest -n auto --dist loadfile
+
+# The capture explorer over results/ (what `make run` built, or any run's):
+# http://127.0.0.1:8050 (PORT=..., HOST=... to change).
+PORT ?= 8050
+HOST ?= 127.0.0.1
+explore: setup
+	denali explore --results results --host $(HOST) --port $(PORT)
 
 setup: $(STAMP) debs
 

@@ -3,6 +3,7 @@
 import json
 import re
 import shutil
+import time
 
 import numpy as np
 import pandas as pd
@@ -18,6 +19,7 @@ from denali_pipe.objects import load_catalogue
 from denali_pipe.transforms import FIDELITIES
 from denali_pipe.twin.render import read_twin
 
+import browser
 from workflow import copy_workflow, job_counts, snakemake
 
 pytestmark = pytest.mark.e2e
@@ -382,3 +384,154 @@ def test_report_has_every_table_and_figure_with_its_caption(tiny_run):
     experiments = ("Figure 10: non-retroreflective objects", "Figure 11: the italic", "Figure 13: 3x3", "Figure 14: 8x8")
     for title in (*titles, *experiments, "Table 7: shape classification", "Table 8: size classification", "Table 9: localisation RMSE", "Timing-jitter sweep"):
         assert title in html
+
+
+# --- the capture explorer ---------------------------------------------------------
+
+
+def tree_state(root):
+    """{relative path: (size, mtime_ns)} of everything under root."""
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*")}
+
+
+def _changed(driver, element_id, old, timeout=browser.WAIT_S):
+    """Wait until an element's text differs from `old` and no callback is pending; its new text."""
+    return browser.wait_for(driver, f"const e = document.getElementById(arguments[0]); return e.innerText !== arguments[1] && ({browser.IDLE}) && e.innerText;", element_id, old, timeout=timeout)
+
+
+def _timed(driver, action, element_id):
+    """(seconds from the control change until the last panel is redrawn, as
+    the browser's clock and Plotly's afterplot events tell; the element's new text)."""
+    old = browser.text(driver, element_id)
+    driver.execute_script(browser.ARM_REDRAWN_JS, list(browser.PANELS))
+    action()
+    new = _changed(driver, element_id, old)
+    return browser.wait_for(driver, browser.REDRAWN_JS, list(browser.PANELS)) / 1000, new
+
+
+def test_explorer_in_a_browser(tiny_run, tmp_path):
+    """`denali explore` on the tiny run's outputs, driven in headless
+    Chromium: changing object and location redraws the panels with the
+    calibration's labels and the cells' own predictions; nothing under
+    results/ is written."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.actions.action_builder import ActionBuilder
+    from selenium.webdriver.common.by import By
+
+    from denali_pipe.dataset import read_dataset
+    from denali_pipe.evaluate import load_cell, predict
+    from denali_pipe.poses.pnp import project
+
+    browser.ensure_chromium()
+    results = tiny_run / "results"
+    before = tree_state(results)
+    x, samples, _ = read_dataset(results / "datasets/3x3.zarr", results / "datasets/3x3.parquet")
+    labels = pd.read_parquet(results / "calibration/tag1_positions.parquet").set_index("location")
+    camera = json.loads((results / "calibration/scene.json").read_text())["tracking_camera"]
+    intr = camera["intrinsics"]
+    K = np.array([[intr["fx"], 0, intr["cx"]], [0, intr["fy"], intr["cy"]], [0, 0, 1]])
+    cells = {task: load_cell(results / f"runs/clean/3x3/random/cnn1d_{task}/seed42") for task in ("location", "shape", "size")}
+
+    def expected(set_name, location):
+        """What the cells predict for the set's capture (repeat 0, the page's default) and its label."""
+        row = samples.index[(samples.set == set_name) & (samples.location == location) & (samples.repeat == 0)]
+        assert len(row) == 1
+        xi = x[row]
+        shape, size = (c.classes[int(predict(c, xi)[0].argmax())] for c in (cells["shape"], cells["size"]))
+        return predict(cells["location"], xi)[0], shape, size, labels.loc[location, ["x", "y", "z"]].to_numpy(float)
+
+    def check_panels(set_name, location):
+        xy, shape, size, truth = expected(set_name, location)
+        assert browser.text(driver, "truth-location") == f"x {truth[0]:.4f} m, y {truth[1]:.4f} m"
+        assert browser.text(driver, "pred-shape") == shape and browser.text(driver, "pred-size") == size
+        grid = browser.figure(driver, "grid")["traces"]
+        assert np.allclose([grid[f"ground truth (location {location})"][a][0] for a in "xy"], truth[:2], atol=1e-9)
+        assert np.allclose([grid["prediction"][a][0] for a in "xy"], xy, atol=1e-6)
+        frame = browser.figure(driver, "frame")
+        assert f"location {location}" in frame["title"]
+        uv = project(K, np.array(camera["R_world_to_camera"]), np.array(camera["t_world_to_camera"]), truth[None])[0]
+        assert np.allclose([frame["traces"]["ground truth"][a][0] for a in "xy"], uv, atol=1e-6)
+        bars = browser.figure(driver, "shape")
+        assert bars["title"].startswith(f"Shape: predicted {shape}")
+
+    shots = tmp_path / "screenshots"
+    shots.mkdir()
+    with browser.explorer(results, tmp_path / "explore.log") as server, browser.chromium(tmp_path / "profile") as driver:
+        t0 = time.perf_counter()
+        driver.get(server.url)
+        browser.wait_for(driver, f"const e = document.getElementById('pred-shape'); return e && e.innerText !== '' && ({browser.IDLE});")
+        first_page = time.perf_counter() - t0
+        # the start: the first benchmark object, 8 in, 3x3, lights on, the location nearest 50
+        locations = select_locations(tiny_config(tiny_run)["rig"]["n_locations"])
+        start = int(locations[np.argmin(np.abs(locations - 50))])
+        check_panels("1_8inch_3x3_lighton", start)
+        grid = browser.figure(driver, "grid")["traces"]["test error"]
+        # the heat map recombines to the cell's own test RMSE (its test split drawn again)
+        n, rms = np.array([c[2] for c in grid["customdata"]]), np.array([c[1] for c in grid["customdata"]])
+        m = json.loads((results / "runs/clean/3x3/random/cnn1d_location/seed42/metrics.json").read_text())
+        assert n.sum() == m["n_test"] and np.sqrt((n * rms**2).sum() / n.sum()) / 100 == pytest.approx(m["test"]["rmse_euclidean"], rel=1e-5)
+        driver.save_screenshot(str(shots / "1_start.png"))
+
+        # object: A, from the dropdown
+        def pick(obj):
+            driver.find_element(By.ID, "object").click()
+            driver.find_element(By.XPATH, f"//label[contains(@class, 'dash-dropdown-option')][.//input[@value='{obj}']]").click()
+
+        object_s, shape_truth = _timed(driver, lambda: pick("A"), "truth-shape")
+        assert shape_truth == "A"
+        check_panels("A_8inch_3x3_lighton", start)
+        driver.save_screenshot(str(shots / "2_object_A.png"))
+
+        # location: a click on the slider at the next captured location's mark, then the previous-location button back
+        after = int(locations[list(locations).index(start) + 1])
+        mark = driver.find_element(By.XPATH, f"//div[@id='location']//div[contains(@class, 'dash-slider-mark')][text()='{after}']")
+        slider_s, _ = _timed(driver, lambda: ActionChains(driver).click(mark).perform(), "truth-location")
+        check_panels("A_8inch_3x3_lighton", after)
+        driver.save_screenshot(str(shots / "3_slider.png"))
+        _timed(driver, lambda: driver.find_element(By.ID, "previous").click(), "truth-location")
+        check_panels("A_8inch_3x3_lighton", start)
+
+        # location: a click on the grid's first location, at its point's place in the viewport
+        target = int(locations[0])
+        gd = driver.find_element(By.CSS_SELECTOR, "#grid .js-plotly-plot")
+        xy = driver.execute_script(
+            """const gd = arguments[0], L = gd._fullLayout, loc = arguments[1];
+               gd.scrollIntoView({block: 'center'});
+               const r = gd.getBoundingClientRect();
+               for (const t of gd._fullData) { if (!t.customdata) continue;
+                 const i = Array.from(t.customdata, c => Array.isArray(c) || ArrayBuffer.isView(c) ? c[0] : c).indexOf(loc);
+                 if (i >= 0) return [r.left + L._size.l + L.xaxis.l2p(t.x[i]), r.top + L._size.t + L.yaxis.l2p(t.y[i])]; }
+               return null;""",
+            gd, target,
+        )  # fmt: skip
+
+        def click():
+            actions = ActionBuilder(driver)
+            actions.pointer_action.move_to_location(round(xy[0]), round(xy[1])).pause(0.2).click()
+            actions.perform()
+
+        click_s, _ = _timed(driver, click, "truth-location")
+        check_panels("A_8inch_3x3_lighton", target)
+        driver.save_screenshot(str(shots / "4_grid_click.png"))
+
+        # a held-out variant: the base shape's class; rule all builds no features for it, and the page says what does
+        variant = "generalization1white"
+        assert _timed(driver, lambda: pick(variant), "truth-shape")[1] == "1"
+        assert f"snakemake --cores all results/features/{variant}_8inch_3x3_lighton.zarr" in browser.text(driver, "messages")
+        assert browser.text(driver, "pred-shape") == ""
+        driver.save_screenshot(str(shots / "5_variant.png"))
+
+        # 8x8 in the dark theme: the raw 8x8 histograms; the cells, trained at 3x3 only, say what builds one
+        driver.find_element(By.XPATH, "//div[@id='theme']//input[@value='dark']").click()
+        driver.find_element(By.XPATH, "//div[@id='resolution']//input[@value='8x8']").click()
+        notes = _changed(driver, "messages", browser.text(driver, "messages"))
+        assert "no training cell at 8x8" in notes and "results/runs/clean/8x8/random/cnn1d_location/seed42/metrics.json" in notes
+        assert browser.figure(driver, "histograms")["n_traces"] == 2 * 64  # the capture and the background's mean in each zone
+        page = driver.page_source
+        driver.save_screenshot(str(shots / "6_8x8_dark.png"))
+        print(
+            f"\nexplorer: first page {first_page:.2f} s; control change to redrawn panels: object {object_s:.2f} s, "
+            f"slider {slider_s:.2f} s, grid click {click_s:.2f} s; screenshots in {shots}"
+        )
+    assert "Traceback" not in page and "Traceback" not in server.output()
+    assert tree_state(results) == before  # read only

@@ -416,6 +416,12 @@ def cmd_rig_vs_real(args: argparse.Namespace) -> None:
     log.info("wrote %s and %s", args.png, args.csv)
 
 
+def cmd_explore(args: argparse.Namespace) -> None:
+    from denali_pipe.explore.app import serve
+
+    serve(Path(args.results), args.host, args.port)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from denali_pipe.conditions import CONDITION_GROUPS
     from denali_pipe.conditions import TABLES as CONDITION_TABLES
@@ -597,6 +603,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--png", required=True, help="the figure")
     s.add_argument("--csv", required=True, help="the measured numbers beside the real figures'")
     s.set_defaults(func=cmd_rig_vs_real)
+
+    s = sub.add_parser("explore", help="browse the workflow's outputs in a web app: captures, histograms, twins, live predictions")
+    s.add_argument("--results", default="results", help="the results folder to read (nothing is written to it)")
+    s.add_argument("--host", default="127.0.0.1", help="address to serve on")
+    s.add_argument("--port", type=int, default=8050, help="port to serve on")
+    s.set_defaults(func=cmd_explore)
     return p
 
 
