@@ -39,7 +39,7 @@ def test_an_empty_results_folder_names_what_builds_each_output(tmp_path):
 def test_a_missing_cell_names_its_target_or_why_it_is_never_trained(tmp_path):
     inv = scan(tmp_path)
     choice = CellChoice("clean", "3x3", "shape_held_out", "cnn1d", 42)
-    assert inv.cell_status(choice, "location").command == "snakemake --cores all results/runs/clean/3x3/shape_held_out/cnn1d_location/seed42/metrics.json"
+    assert inv.cell_status(choice, "location").command == "snakemake --cores all results/runs/clean/3x3/all/shape_held_out/cnn1d_location/seed42/metrics.json"
     ill_posed = inv.cell_status(choice, "shape")
     assert "never occur in training" in ill_posed.what and ill_posed.command == ""
 

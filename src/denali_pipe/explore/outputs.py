@@ -15,7 +15,7 @@ from pathlib import Path
 import pandas as pd
 
 from denali_pipe.capture_sets import CaptureSet, parse_set_name
-from denali_pipe.cells import TASKS, is_ill_posed
+from denali_pipe.cells import ALL, TASKS, is_ill_posed
 from denali_pipe.evaluate import MODEL_FILE
 from denali_pipe.geometry import RESOLUTIONS
 
@@ -65,8 +65,9 @@ def index_path(set_name: str) -> str:
 
 @dataclass(frozen=True, order=True)
 class CellChoice:
-    """A training cell but for its task: the explorer predicts with the
-    location, shape and size cells of one choice."""
+    """A benchmark training cell (condition `all`: trained on every sample)
+    but for its task: the explorer predicts with the location, shape and
+    size cells of one choice."""
 
     protocol: str
     resolution: str
@@ -76,7 +77,7 @@ class CellChoice:
 
     def run_path(self, task: str) -> str:
         """The run folder of this choice's `task` cell, relative to results/ (rules/common.smk's RUN_DIR)."""
-        return f"{RUNS}/{self.protocol}/{self.resolution}/{self.split}/{self.model}_{task}/seed{self.seed}"
+        return f"{RUNS}/{self.protocol}/{self.resolution}/{ALL}/{self.split}/{self.model}_{task}/seed{self.seed}"
 
 
 @dataclass(frozen=True)
@@ -149,12 +150,12 @@ def _zarr_names(folder: Path) -> list[str]:
 
 
 def _cells(runs: Path) -> frozenset[tuple[CellChoice, str]]:
-    """Every saved model under runs/<protocol>/<res>/<split>/<model>_<task>/seed<N>/."""
+    """Every saved benchmark model under runs/<protocol>/<res>/all/<split>/<model>_<task>/seed<N>/."""
     found = set()
-    for model_file in runs.glob(f"*/*/*/*_*/seed*/{MODEL_FILE}"):
+    for model_file in runs.glob(f"*/*/{ALL}/*/*_*/seed*/{MODEL_FILE}"):
         seed_dir = model_file.parent
         model, _, task = seed_dir.parent.name.rpartition("_")
-        split, res, protocol = seed_dir.parent.parent.name, seed_dir.parents[2].name, seed_dir.parents[3].name
+        split, res, protocol = seed_dir.parent.parent.name, seed_dir.parents[3].name, seed_dir.parents[4].name
         if task in TASKS and seed_dir.name.removeprefix("seed").isdigit():
             found.add((CellChoice(protocol, res, split, model, int(seed_dir.name.removeprefix("seed"))), task))
     return frozenset(found)
