@@ -11,7 +11,7 @@ CORES ?= all
 # project through the interpreter that runs snakemake).
 export PATH := $(abspath $(BIN)):$(PATH)
 
-.PHONY: run test explore setup debs
+.PHONY: run test lint explore setup debs
 
 # The headline target: Table 5 (the 1D CNN under five splits) on the demo preset.
 run: setup
@@ -20,8 +20,15 @@ run: setup
 # One pytest worker per core, a test file per worker (module fixtures such as
 # the tiny DAG run are built once): the end-to-end runs overlap with each
 # other and with the unit tests (tests/conftest.py collects them first).
-test: setup
+test: setup lint
 	python -m pytest -n auto --dist loadfile
+
+# The style holds without anyone policing it: ruff (lint, format) on the
+# Python, snakefmt on the workflow; settings in pyproject.toml.
+lint: setup
+	ruff check src tests scripts
+	ruff format --check src tests scripts
+	snakefmt --check Snakefile rules
 
 # The capture explorer over results/ (what `make run` built, or any run's):
 # http://127.0.0.1:8050 (PORT=..., HOST=... to change).

@@ -3,6 +3,7 @@
 # `snakemake --cores all results/table4.csv`. `snakemake --report
 # results/report.html` collects every table and figure with its caption.
 
+
 report: "report/workflow.rst"
 
 
@@ -22,6 +23,7 @@ include: "rules/jitter.smk"
 
 
 rule all:
+    default_target: True
     input:
         "results/rig_examples.png",
         "results/rig_vs_real.png",
@@ -49,4 +51,3 @@ rule all:
         "results/fig13.png",
         "results/fig14.png",
         "results/jitter.png",
-    default_target: True

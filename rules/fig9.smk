@@ -16,15 +16,15 @@ rule fig9:
     output:
         png=report("results/fig9.png", caption="../report/fig9.rst", category="5. Sim-to-real"),
         csv="results/fig9.csv",
-    params:
-        config=FIG9_JOB_CONFIG,
-        hyper=FIG9_HYPER,
-    # models this small train best single-threaded beside other jobs (see train.threads)
-    threads: config["train"]["threads"]
     log:
         "logs/fig9.log",
     benchmark:
         "benchmarks/fig9.tsv"
+    # models this small train best single-threaded beside other jobs (see train.threads)
+    threads: config["train"]["threads"]
+    params:
+        config=FIG9_JOB_CONFIG,
+        hyper=FIG9_HYPER,
     shell:
         "{DENALI} fig9 --features {input.features} --twins {input.twins} --positions {input.positions} --transforms {input.transforms}"
         " --config {params.config:q} --hyper {params.hyper:q} --threads {threads} --out {output.png} > {log} 2>&1"

@@ -43,10 +43,10 @@ rule variant_dataset:
     output:
         x=directory("results/datasets/{variant}_{res}.zarr"),
         table="results/datasets/{variant}_{res}.parquet",
-    wildcard_constraints:
-        variant="|".join(HELD_OUT),
     log:
         "logs/datasets/{variant}_{res}.log",
+    wildcard_constraints:
+        variant="|".join(HELD_OUT),
     shell:
         "{DENALI} dataset {input.features} --variant {wildcards.variant} --positions {input.positions} --objects-sheet {input.sheet}"
         " --out {output.x} --table {output.table} > {log} 2>&1"
@@ -60,12 +60,12 @@ rule evaluate:
         table="results/datasets/{dataset}.parquet",
     output:
         EVALUATION,
-    params:
-        run=lambda w, input: Path(input.model).parent,
-    wildcard_constraints:
-        dataset=rf"({'|'.join(HELD_OUT)})_(3x3|8x8)",
     log:
         "logs/" + EVALUATION.removeprefix("results/").removesuffix(".json") + ".log",
+    wildcard_constraints:
+        dataset=rf"({'|'.join(HELD_OUT)})_(3x3|8x8)",
+    params:
+        run=lambda w, input: Path(input.model).parent,
     shell:
         "{DENALI} evaluate {params.run} {input.x} --table {input.table} --out {output} > {log} 2>&1"
 

@@ -8,12 +8,12 @@ rule ingest:
     output:
         store=directory(store("{set}")),
         index="results/index/{set}.parquet",
-    params:
-        object=ingest_object_arg,
     log:
         "logs/ingest/{set}.log",
     benchmark:
         "benchmarks/ingest/{set}.tsv"
+    params:
+        object=ingest_object_arg,
     shell:
         "{DENALI} ingest {input} {params.object} --store {output.store} --index {output.index} > {log} 2>&1"
 

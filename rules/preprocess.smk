@@ -40,5 +40,4 @@ rule dataset:
     log:
         "logs/datasets/{res}.log",
     shell:
-        "{DENALI} dataset {input.features} --positions {input.positions} --objects-sheet {input.sheet}"
-        " --out {output.x} --table {output.table} > {log} 2>&1"
+        "{DENALI} dataset {input.features} --positions {input.positions} --objects-sheet {input.sheet}" " --out {output.x} --table {output.table} > {log} 2>&1"

@@ -53,12 +53,12 @@ rule training_curves:
     output:
         png=report("results/{fig}.png", caption="../report/training_curves.rst", category="3. Training"),
         csv="results/{fig}.csv",
-    params:
-        title=lambda w: shlex.quote(f"1D CNN {CURVE_TASK[w.fig]} training curves ({TRAIN['resolution']}, random split, {TRAIN['protocol']} protocol)"),
-    wildcard_constraints:
-        fig="fig16|fig17",
     log:
         "logs/report/{fig}.log",
+    wildcard_constraints:
+        fig="fig16|fig17",
+    params:
+        title=lambda w: shlex.quote(f"1D CNN {CURVE_TASK[w.fig]} training curves ({TRAIN['resolution']}, random split, {TRAIN['protocol']} protocol)"),
     shell:
         "{DENALI} report {wildcards.fig} {input} --title {params.title} --out {output.png} > {log} 2>&1"
 
@@ -68,11 +68,11 @@ rule condition_table:
         condition_table_metrics,
     output:
         report("results/{table}.csv", caption="../report/condition_table.rst", category="3. Training"),
-    params:
-        groups=" ".join(config["conditions"]["groups"]),
     log:
         "logs/report/{table}.log",
     wildcard_constraints:
         table="|".join(CONDITION_TABLES),
+    params:
+        groups=" ".join(config["conditions"]["groups"]),
     shell:
         "{DENALI} report {wildcards.table} {input} --groups {params.groups} --out {output} > {log} 2>&1"

@@ -10,18 +10,14 @@ if config["source"] == "synthetic":
             # the release poses.json the tracked scene follows (rig.scene_poses), so that its edits rerun the rig
             scene_poses=[config["rig"]["scene_poses"]] if config["rig"]["scene_poses"] else [],
         output:
-            [
-                directory(raw_set(f"{{object}}_{{size}}_{res}_{light}"))
-                for res in config["resolutions"]
-                for light in config["lightings"]
-            ],
-        params:
-            object=rig_object_arg,
-            config=json.dumps({"seed": config["seed"], "rig": config["rig"]}, sort_keys=True),
+            [directory(raw_set(f"{{object}}_{{size}}_{res}_{light}")) for res in config["resolutions"] for light in config["lightings"]],
         log:
             "logs/rig/{object}_{size}.log",
         benchmark:
             "benchmarks/rig/{object}_{size}.tsv"
+        params:
+            object=rig_object_arg,
+            config=json.dumps({"seed": config["seed"], "rig": config["rig"]}, sort_keys=True),
         shell:
             "{DENALI} rig {output} {params.object} --config {params.config:q} > {log} 2>&1"
 

@@ -11,19 +11,19 @@ rule train:
         metrics=f"{RUN_DIR}/metrics.json",
         curves=f"{RUN_DIR}/curves.csv",
         model=f"{RUN_DIR}/model.pt",
+    log:
+        f"logs/{RUN_DIR}.log",
+    benchmark:
+        f"benchmarks/{RUN_DIR}.tsv"
+    threads: config["train"]["threads"]
+    resources:
+        gpu=config["train"]["gpus"],
     params:
         cell=cell_arg,
         hyper=hyper_arg,
         outdir=lambda w, output: Path(output.metrics).parent,
         validation=config["train"]["validation_fraction"],
         budget=budget_arg,
-    threads: config["train"]["threads"]
-    resources:
-        gpu=config["train"]["gpus"],
-    log:
-        f"logs/{RUN_DIR}.log",
-    benchmark:
-        f"benchmarks/{RUN_DIR}.tsv"
     shell:
         "{DENALI} train {input.x} --table {input.table} --cell {params.cell} --hyper {params.hyper}"
         " --validation-fraction {params.validation} {params.budget} --threads {threads} --outdir {params.outdir} > {log} 2>&1"

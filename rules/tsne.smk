@@ -14,18 +14,18 @@ rule tsne:
     output:
         png=report("results/{fig}.png", caption="../report/tsne.rst", category="7. Embeddings"),
         csv="results/{fig}.csv",
+    log:
+        "logs/{fig}.log",
+    benchmark:
+        "benchmarks/{fig}.tsv"
+    wildcard_constraints:
+        fig="fig13|fig14",
+    threads: config["train"]["threads"]
     params:
         runs=lambda w, input: [Path(p).parent for p in input.models],
         title=lambda w: shlex.quote(
             f"t-SNE of the 1D CNN shape classifier's penultimate layer ({TSNE_RESOLUTION[w.fig]}, random split, {TRAIN['protocol']} protocol)"
         ),
-    wildcard_constraints:
-        fig="fig13|fig14",
-    threads: config["train"]["threads"]
-    log:
-        "logs/{fig}.log",
-    benchmark:
-        "benchmarks/{fig}.tsv"
     shell:
         "{DENALI} tsne {params.runs} --dataset {input.x} --table {input.table} --seed {config[seed]} --title {params.title}"
         " --threads {threads} --out {output.png} > {log} 2>&1"

@@ -13,7 +13,13 @@ TWIN_MESHES = [f for name, size in TWIN_PAIRS for f in rig_mesh_files(SimpleName
 # that e.g. mitransient's spp reruns no analytic twin.
 TWIN = config["twin"]
 TWIN_JOB_CONFIG = json.dumps(
-    {"seed": config["seed"], "twin": {**{k: TWIN[k] for k in ("renderer", "wall_albedo", "object_albedo", "table", "table_albedo", "footprint")}, TWIN["renderer"]: TWIN[TWIN["renderer"]]}},
+    {
+        "seed": config["seed"],
+        "twin": {
+            **{k: TWIN[k] for k in ("renderer", "wall_albedo", "object_albedo", "table", "table_albedo", "footprint")},
+            TWIN["renderer"]: TWIN[TWIN["renderer"]],
+        },
+    },
     sort_keys=True,
 )
 # Fig 18's captures are drawn when the rule is needed (input functions), so a
@@ -27,13 +33,13 @@ rule twin:
         meshes=rig_mesh_files,
     output:
         directory("results/twin/{object}_{size}.zarr"),
-    params:
-        object=rig_object_arg,
-        config=TWIN_JOB_CONFIG,
     log:
         "logs/twin/{object}_{size}.log",
     benchmark:
         "benchmarks/twin/{object}_{size}.tsv"
+    params:
+        object=rig_object_arg,
+        config=TWIN_JOB_CONFIG,
     shell:
         "{DENALI} twin {input.scene} {params.object} --size {wildcards.size} --config {params.config:q} --out {output} > {log} 2>&1"
 
@@ -45,13 +51,15 @@ rule render_benchmark:
     output:
         png=report("results/render_benchmark.png", caption="../report/render_benchmark.rst", category="4. Digital twin"),
         csv="results/render_benchmark.csv",
-    params:
-        objects=json.dumps(sorted((CATALOGUE[name].to_dict() for name in dict.fromkeys(n for n, _ in TWIN_PAIRS)), key=lambda d: d["name"]), sort_keys=True),
-        config=json.dumps({"seed": config["seed"], "sizes": config["sizes"], "twin": {k: v for k, v in TWIN.items() if k not in ("renderer", "fig18")}}, sort_keys=True),
     log:
         "logs/render_benchmark.log",
     benchmark:
         "benchmarks/render_benchmark.tsv"
+    params:
+        objects=json.dumps(sorted((CATALOGUE[name].to_dict() for name in dict.fromkeys(n for n, _ in TWIN_PAIRS)), key=lambda d: d["name"]), sort_keys=True),
+        config=json.dumps(
+            {"seed": config["seed"], "sizes": config["sizes"], "twin": {k: v for k, v in TWIN.items() if k not in ("renderer", "fig18")}}, sort_keys=True
+        ),
     shell:
         "{DENALI} render-benchmark {input.scene} --objects {params.objects:q} --config {params.config:q} --out {output.png} > {log} 2>&1"
 
@@ -66,10 +74,10 @@ rule fig18:
     output:
         png=report("results/fig18.png", caption="../report/fig18.rst", category="4. Digital twin"),
         csv="results/fig18.csv",
-    params:
-        config=json.dumps({"seed": config["seed"], "variant": TWIN["mitransient"]["variant"], "fig18": TWIN["fig18"]}, sort_keys=True),
     log:
         "logs/fig18.log",
+    params:
+        config=json.dumps({"seed": config["seed"], "variant": TWIN["mitransient"]["variant"], "fig18": TWIN["fig18"]}, sort_keys=True),
     shell:
         "{DENALI} fig18 {input.scene} --sets {input.sets} --backgrounds {input.backgrounds} --twins {input.twins}"
         " --crop {input.crop} --config {params.config:q} --out {output.png} > {log} 2>&1"

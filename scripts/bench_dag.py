@@ -34,9 +34,11 @@ def main() -> None:
             secs, out = run(wd, "-n", "--quiet", "rules", "--configfile", "config/presets/paper.yaml")
             times.append(secs)
         counts = job_counts(out)
-        print(f"paper preset, every table and figure: `snakemake -n` builds a DAG of {counts['total']} jobs "
-              f"in {statistics.median(times):.1f} s (median of {len(times)}; min {min(times):.1f}, max {max(times):.1f}); "
-              f"targets: <= 30 s, <= 2,000 jobs")
+        print(
+            f"paper preset, every table and figure: `snakemake -n` builds a DAG of {counts['total']} jobs "
+            f"in {statistics.median(times):.1f} s (median of {len(times)}; min {min(times):.1f}, max {max(times):.1f}); "
+            f"targets: <= 30 s, <= 2,000 jobs"
+        )
         print("jobs per rule: " + ", ".join(f"{r} {n}" for r, n in counts.items() if r != "total"))
     finally:
         shutil.rmtree(wd)

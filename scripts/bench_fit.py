@@ -80,9 +80,11 @@ def recovery_row(snr: float, captures: int, seeds: int, boot: dict, seed: int) -
 def recovery(captures: int, seeds: int, boot: dict, seed: int) -> None:
     # the synthetic pairs are the tests' own, so the benchmark and the tests measure one experiment
     sys.path.insert(0, str(REPO / "tests"))
-    print(f"{captures} captures x 3 repeats per data set, {seeds} data sets per SNR; bootstrap {boot['resamples']} resamples, {boot['level']:.0%} intervals, max_rel_se {boot['max_rel_se']}")
+    print(
+        f"{captures} captures x 3 repeats per data set, {seeds} data sets per SNR; bootstrap {boot['resamples']} resamples, {boot['level']:.0%} intervals, max_rel_se {boot['max_rel_se']}"
+    )
     print("error: RMS relative error (kernel: mean L1); se: mean bootstrap SE (relative; kernel: mean L1 of the refits);")
-    print(f"cover: share of intervals holding the truth (kernel: of taps); flag: share of fits flagging it as not identified\n")
+    print("cover: share of intervals holding the truth (kernel: of taps); flag: share of fits flagging it as not identified\n")
     print(f"{'SNR':>5} | " + " | ".join(f"{p:^22}" for p in PARAMETERS) + " | fit s  check s")
     print(f"{'':>5} | " + " | ".join(f"{'error    se  cov flag':^22}" for _ in PARAMETERS) + " |")
     for snr in SNRS:
@@ -114,12 +116,18 @@ def demo(root: Path, cfg: dict) -> None:
     check = check_fit(train, t, boot["resamples"], cfg["seed"], boot["level"], boot["max_rel_se"])
     t3 = time.perf_counter()
 
-    print(f"{len(features)} sets, {len(pairs.real)} captures x {pairs.real.shape[1]} repeats, {pairs.bins} bins from {pairs.crop_start}; fit on {len(split.train)} training captures")
+    print(
+        f"{len(features)} sets, {len(pairs.real)} captures x {pairs.real.shape[1]} repeats, {pairs.bins} bins from {pairs.crop_start}; fit on {len(split.train)} training captures"
+    )
     print(f"read + pair + split  {t1 - t0:7.2f} s")
     print(f"fit                  {t2 - t1:7.2f} s   a = {t.a:.6g}, gamma = {t.gamma:.4f}, a_noise = {t.a_noise:.4f}, b_noise = {t.b_noise:.1f} counts^2")
     print(f"                                kernel = {np.round(t.kernel, 4).tolist()}")
     b = check.bootstrap
-    print(f"check                {t3 - t2:7.2f} s   {b.resamples} resamples; SE: " + ", ".join(f"{p} {b.se[p]:.4g}" for p in SCALARS) + f", kernel L1 {b.kernel_l1:.4f}")
+    print(
+        f"check                {t3 - t2:7.2f} s   {b.resamples} resamples; SE: "
+        + ", ".join(f"{p} {b.se[p]:.4g}" for p in SCALARS)
+        + f", kernel L1 {b.kernel_l1:.4f}"
+    )
     print(f"                                peak SNR {check.peak_snr:.2f}; identifiable: {check.identifiable} {check.unidentified or ''}")
     print(f"total                {t3 - t0:7.2f} s   (target <= 120 s on 2 cores)")
     print(f"peak RSS             {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.0f} MiB")

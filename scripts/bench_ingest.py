@@ -149,12 +149,14 @@ def main() -> None:
         t_pkl = timed(lambda: ingest_pickle(pkl, out / f"pkl{next(runs)}.zarr", spec))
         mb = 1e6
         print(f"\nthroughput ({args.locations} locations; best of 3; raw input read per second):")
-        print(f"  histograms only : {hist_raw / mb:7.2f} MB in {t_hist:6.3f} s = {hist_raw / mb / t_hist:7.1f} MB/s"
-              f"  ({args.locations / t_hist:.0f} locations/s)")
-        print(f"  bare np.load    : {hist_raw / mb:7.2f} MB in {t_load:6.3f} s = {hist_raw / mb / t_load:7.1f} MB/s"
-              f"  -> histogram ingest / np.load = {t_hist / t_load:.1f}x")
-        print(f"  release + frames: {all_raw / mb:7.2f} MB in {t_full:6.3f} s = {all_raw / mb / t_full:7.1f} MB/s"
-              f"  ({args.locations / t_full:.0f} locations/s)")
+        print(
+            f"  histograms only : {hist_raw / mb:7.2f} MB in {t_hist:6.3f} s = {hist_raw / mb / t_hist:7.1f} MB/s  ({args.locations / t_hist:.0f} locations/s)"
+        )
+        print(
+            f"  bare np.load    : {hist_raw / mb:7.2f} MB in {t_load:6.3f} s = {hist_raw / mb / t_load:7.1f} MB/s"
+            f"  -> histogram ingest / np.load = {t_hist / t_load:.1f}x"
+        )
+        print(f"  release + frames: {all_raw / mb:7.2f} MB in {t_full:6.3f} s = {all_raw / mb / t_full:7.1f} MB/s  ({args.locations / t_full:.0f} locations/s)")
         print(f"  pickle stream   : {tree_bytes(pkl) / mb:7.2f} MB in {t_pkl:6.3f} s = {tree_bytes(pkl) / mb / t_pkl:7.1f} MB/s")
 
         # --- compression ------------------------------------------------------------------
@@ -169,8 +171,10 @@ def main() -> None:
         t_read = timed(lambda: [f for m in FRAME_DIRS for _, f in s.iter_frames(m)], repeat=2)
         frame_bytes = sum(s.frames(m).nbytes for m in FRAME_DIRS)
         t_hread = timed(lambda: s.histograms[:])
-        print(f"  reading back: all frames (iter_frames) {frame_bytes / mb / t_read:.0f} MB/s of decoded arrays; "
-              f"all histograms (histograms[:]) {t_hread * 1e3:.0f} ms per set")
+        print(
+            f"  reading back: all frames (iter_frames) {frame_bytes / mb / t_read:.0f} MB/s of decoded arrays; "
+            f"all histograms (histograms[:]) {t_hread * 1e3:.0f} ms per set"
+        )
 
         # --- peak memory ------------------------------------------------------------------
         quarter = subset(rel, tmp / "quarter" / rel.name, max(1, args.locations // 4))

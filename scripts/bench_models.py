@@ -87,8 +87,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     policy = os.environ.get("OMP_WAIT_POLICY", "default")
-    print(f"training samples/s, {N}x{N} zones, {args.threads} CPU threads, OMP_WAIT_POLICY {policy}, "
-          f"torch {torch.__version__}")
+    print(f"training samples/s, {N}x{N} zones, {args.threads} CPU threads, OMP_WAIT_POLICY {policy}, torch {torch.__version__}")
     columns = "".join(f"{f'bins {bins} batch {batch}':>24}" for bins in BINS for batch in BATCHES)
     print(f"{'model':<12}{'task':<10}{'params':>11}{columns}")
     t_start = time.perf_counter()

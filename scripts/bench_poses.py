@@ -32,11 +32,10 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from pathlib import Path
 
 import cv2
 import numpy as np
-
-from pathlib import Path
 
 from denali_pipe import geometry as geo
 from denali_pipe.poses.calibrate import calibrate
@@ -178,7 +177,7 @@ def throughput(scale: float, lit: list, cpus: list[int]) -> None:
     cam = geo.TRACKING_CAMERA.scaled(scale)
     intr = intrinsics(cam)
     line = []
-    for n in ([1, 2] if len(cpus) >= 2 else [1]):
+    for n in [1, 2] if len(cpus) >= 2 else [1]:
         _pin(cpus[:n])
         cv2.setNumThreads(n)
         det = TagDetector("apriltag", nthreads=n)
@@ -190,7 +189,9 @@ def throughput(scale: float, lit: list, cpus: list[int]) -> None:
         t0 = time.perf_counter()
         estimate_frames([(k, bgr) for k, bgr, _ in lit], intr, detector=det)
         dt = time.perf_counter() - t0
-        line.append(f"{n} core{'s' if n > 1 else ''}, {n} thread{'s' if n > 1 else ''}: {len(lit) / dt:5.1f} fps ({1e3 * dt / len(lit):5.1f} ms/frame; detection+refinement {1e3 * dd / len(lit):5.1f})")
+        line.append(
+            f"{n} core{'s' if n > 1 else ''}, {n} thread{'s' if n > 1 else ''}: {len(lit) / dt:5.1f} fps ({1e3 * dt / len(lit):5.1f} ms/frame; detection+refinement {1e3 * dd / len(lit):5.1f})"
+        )
     _pin(cpus)
     if len(cpus) >= 2:
         line.append(f"2 cores, 2 single-thread processes: {two_processes(scale, lit, cpus):5.1f} fps")
@@ -228,9 +229,14 @@ def accuracy(scene: TrackedScene, scale: float, locations: list[int], n_sets: in
     norm = np.linalg.norm(err, axis=1)
     worst = max(static, key=static.get)
     print(f"  scale {scale} ({cam.width}x{cam.height}), {n_sets} sets x {len(locations)} locations, {1e3 * dt / (n_sets * len(locations)):.0f} CPU ms/frame")
-    print(f"    static tags (Table 6 mean): mean {np.mean(list(static.values())):.2f} max {static[worst]:.2f} (tag {worst}); " + " ".join(f"{t}:{e:.2f}" for t, e in sorted(static.items())))
+    print(
+        f"    static tags (Table 6 mean): mean {np.mean(list(static.values())):.2f} max {static[worst]:.2f} (tag {worst}); "
+        + " ".join(f"{t}:{e:.2f}" for t, e in sorted(static.items()))
+    )
     ax = np.abs(err).mean(axis=0)
-    print(f"    object tag per location: mean |error| x/y/z {ax[0]:.2f}/{ax[1]:.2f}/{ax[2]:.2f}, |error| mean {norm.mean():.2f} max {norm.max():.2f} (location {locations[int(np.argmax(norm))]})")
+    print(
+        f"    object tag per location: mean |error| x/y/z {ax[0]:.2f}/{ax[1]:.2f}/{ax[2]:.2f}, |error| mean {norm.mean():.2f} max {norm.max():.2f} (location {locations[int(np.argmax(norm))]})"
+    )
 
 
 def main() -> None:

@@ -53,10 +53,12 @@ def bench_tree(preset: list[str], label: str, cores: int) -> None:
         rss = pd.concat([pd.read_csv(p, sep="\t") for p in (wd / "benchmarks/rig").glob("*.tsv")])
         raw = wd / "data/raw"
         n_sets = sum(1 for _ in raw.iterdir())
-        print(f"{label}: raw tree of {n_sets} sets, {tree_bytes(raw) / 1e9:.2f} GB, "
-              f"written in {secs:.1f} s on {cores} cores ({len(rss)} rig jobs); "
-              f"peak memory per rig job {rss.max_rss.max():.0f} MB (median {rss.max_rss.median():.0f} MB), "
-              f"job wall time median {rss.s.median():.1f} s, max {rss.s.max():.1f} s")
+        print(
+            f"{label}: raw tree of {n_sets} sets, {tree_bytes(raw) / 1e9:.2f} GB, "
+            f"written in {secs:.1f} s on {cores} cores ({len(rss)} rig jobs); "
+            f"peak memory per rig job {rss.max_rss.max():.0f} MB (median {rss.max_rss.median():.0f} MB), "
+            f"job wall time median {rss.s.median():.1f} s, max {rss.s.max():.1f} s"
+        )
     finally:
         shutil.rmtree(wd)
 

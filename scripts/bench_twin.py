@@ -87,7 +87,9 @@ def sweep(cal, specs, cfg, settings, samples: list[int]) -> None:
             h = r.render(sc.location).mean(axis=(0, 1))
             rows.append({"samples": n, "scene": sc.label, "points": len(r.points), "ms": 1000 * (time.perf_counter() - t0), "error_nl2": nl2(h, ref)})
     df = pd.DataFrame(rows)
-    print(df.groupby("samples").agg(points=("points", "mean"), ms=("ms", "median"), error_mean=("error_nl2", "mean"), error_max=("error_nl2", "max")).to_string())
+    print(
+        df.groupby("samples").agg(points=("points", "mean"), ms=("ms", "median"), error_mean=("error_nl2", "mean"), error_max=("error_nl2", "max")).to_string()
+    )
     print(f"max error over scenes: {df.error_nl2.max():.4f}; mean {np.mean(df.error_nl2):.4f}")
 
 

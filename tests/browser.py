@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Iterator
 
 import pytest
-
 from conftest import REPO
 
 CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
@@ -155,4 +154,3 @@ REDRAWN_JS = """
 const done = arguments[0].map(id => window._redrawn[id]);
 return done.every(t => t !== undefined) ? Math.max(...done) - window._armed : null;
 """
-

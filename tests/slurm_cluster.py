@@ -123,12 +123,9 @@ def _install(*packages: str) -> None:
     ensure = REPO / "scripts" / "ensure-debs"
     proc = subprocess.run([str(ensure), *packages], capture_output=True, text=True)
     if proc.returncode != 0:
-        raise RuntimeError(
-            f"{ensure} {' '.join(packages)} failed ({proc.returncode}); "
-            f"cannot start a local SLURM cluster:\n{proc.stderr[-2000:]}"
-        )
+        raise RuntimeError(f"{ensure} {' '.join(packages)} failed ({proc.returncode}); cannot start a local SLURM cluster:\n{proc.stderr[-2000:]}")
     if not Path("/etc/munge/munge.key").exists():
-        warnings.warn("/etc/munge/munge.key was missing: creating one with mungekey")
+        warnings.warn("/etc/munge/munge.key was missing: creating one with mungekey", stacklevel=2)
         subprocess.run(["runuser", "-u", "munge", "--", "mungekey", "--create"], check=True)
 
 
@@ -198,7 +195,8 @@ def _prepare_munged(munge_dir: Path, socket: Path) -> list[str]:
     munge_dir.mkdir(mode=0o755)
     shutil.chown(munge_dir, "munge", "munge")
     return [
-        "munged", "--foreground",
+        "munged",
+        "--foreground",
         f"--socket={socket}",
         f"--pid-file={munge_dir}/munged.pid",
         f"--log-file={munge_dir}/munged.log",
@@ -206,9 +204,7 @@ def _prepare_munged(munge_dir: Path, socket: Path) -> list[str]:
     ]
 
 
-def _start(
-    stack: ExitStack, workdir: Path, name: str, cmd: list[str], user: str | None = None
-) -> subprocess.Popen:
+def _start(stack: ExitStack, workdir: Path, name: str, cmd: list[str], user: str | None = None) -> subprocess.Popen:
     """Start a daemon and register its stop.
 
     Its own process group keeps a Ctrl-C in the terminal from killing it
@@ -216,8 +212,14 @@ def _start(
     """
     with open(workdir / f"{name}.out", "wb") as out:
         proc = subprocess.Popen(
-            cmd, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, process_group=0,
-            user=user, group=user, extra_groups=[] if user else None,
+            cmd,
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            process_group=0,
+            user=user,
+            group=user,
+            extra_groups=[] if user else None,
         )
     stack.callback(_stop, proc)
     return proc
@@ -236,9 +238,10 @@ def _cancel_jobs() -> None:
     """Cancel what a test left queued or running, and give it time to end."""
     subprocess.run(["scancel", f"--partition={PARTITION}"], capture_output=True)
     deadline = time.monotonic() + STOP_TIMEOUT_S
-    while time.monotonic() < deadline and subprocess.run(
-        ["squeue", "-h", "-o", "%i", "--states=PENDING,RUNNING,COMPLETING"], capture_output=True, text=True
-    ).stdout.strip():
+    while (
+        time.monotonic() < deadline
+        and subprocess.run(["squeue", "-h", "-o", "%i", "--states=PENDING,RUNNING,COMPLETING"], capture_output=True, text=True).stdout.strip()
+    ):
         time.sleep(0.25)
 
 
@@ -254,8 +257,5 @@ def _wait(ready: Callable[[], bool], workdir: Path, daemons: list[subprocess.Pop
         if ready():
             return
         time.sleep(0.25)
-    tails = "\n".join(
-        f"--- {out.name} ---\n" + "\n".join(out.read_text(errors="replace").splitlines()[-15:])
-        for out in sorted(workdir.glob("*.out"))
-    )
+    tails = "\n".join(f"--- {out.name} ---\n" + "\n".join(out.read_text(errors="replace").splitlines()[-15:]) for out in sorted(workdir.glob("*.out")))
     raise RuntimeError(f"local SLURM failed to start: {what}\n{tails}")

@@ -11,13 +11,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import ASSETS, REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
 from denali_pipe.objects import load_catalogue
 from denali_pipe.rig import capture
-
-from conftest import ASSETS, REPO
 
 N_LOCATIONS = 3
 REPEATS = 2
@@ -129,7 +128,7 @@ def test_release_frames(release_sets):
         "tracking": geo.TRACKING_CAMERA.scaled(SCALE),
         "colocated": geo.COLOCATED_CAMERA.scaled(SCALE),
     }
-    for name, set_dir in release_sets.items():
+    for set_dir in release_sets.values():
         for cam_name, cam in cams.items():
             for p in sorted((set_dir / f"{cam_name}_rgb").iterdir()):
                 rgb = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)

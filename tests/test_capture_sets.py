@@ -6,6 +6,7 @@ import copy
 from collections import Counter
 
 import pytest
+from conftest import REPO
 
 from denali_pipe.capture_sets import (
     FOLDER_SUFFIX,
@@ -18,8 +19,6 @@ from denali_pipe.capture_sets import (
     select_objects,
 )
 from denali_pipe.objects import BACKGROUNDS, load_catalogue
-
-from conftest import REPO
 
 
 @pytest.fixture(scope="module")
@@ -115,9 +114,7 @@ def test_expected_sets_follow_config(catalogue, demo_config):
     cfg.update(objects=["A", "generalization1italic"], sizes=["4inch"], resolutions=["8x8"], lightings=["lightoff"])
     names = [s.name for s in expected_sets(catalogue, cfg)]
     # the italic object exists only at 8inch, so it drops out; backgrounds stay (8inch by convention)
-    assert names == sorted(
-        ["A_4inch_8x8_lightoff", "NOOBJECTMOUNT_8inch_8x8_lightoff", "NOOBJECT_8inch_8x8_lightoff"]
-    )
+    assert names == sorted(["A_4inch_8x8_lightoff", "NOOBJECTMOUNT_8inch_8x8_lightoff", "NOOBJECT_8inch_8x8_lightoff"])
 
 
 def test_expected_sets_tiny_preset(catalogue, demo_config):

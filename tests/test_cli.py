@@ -5,18 +5,16 @@ from __future__ import annotations
 import copy
 import json
 import logging
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.capture_sets import parse_set_name
 from denali_pipe.cli import main
 from denali_pipe.objects import load_catalogue
 from denali_pipe.rig.capture import synth_sets
-
-from conftest import REPO
 
 N_LOCATIONS = 2
 

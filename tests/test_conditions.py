@@ -53,7 +53,7 @@ def test_every_condition_name_matches_the_wildcard_pattern_and_nothing_else():
         assert re.fullmatch(PATTERN, name), name
     for name in ("none", "jitter", "jitter50", "8inch_x", "random"):
         assert not re.fullmatch(PATTERN, name), name
-    for task, conditions in TABLES.values():
+    for _, conditions in TABLES.values():
         assert set(conditions) <= set(GROUP_OF) and conditions[0] == ALL
 
 

@@ -11,12 +11,11 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest import REPO
 from snakemake.utils import update_config, validate
 
 from denali_pipe.capture_sets import expected_sets
 from denali_pipe.objects import load_catalogue
-
-from conftest import REPO
 
 SCHEMA = str(REPO / "config" / "schema.yaml")
 PRESETS = sorted((REPO / "config" / "presets").glob("*.yaml"))
@@ -144,7 +143,11 @@ def dry_run(root: Path, *args: str) -> subprocess.CompletedProcess:
     assert snakemake, "snakemake not on PATH"
     return subprocess.run(
         [snakemake, "-n", *args],
-        cwd=root, env=env, capture_output=True, text=True, timeout=120,
+        cwd=root,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
 
 

@@ -4,13 +4,12 @@ embeds, and refuses what it cannot score."""
 import numpy as np
 import pytest
 import torch
+from test_train import _cell, data  # noqa: F401 (the fixture)
 
 from denali_pipe.cli import main
 from denali_pipe.dataset import write_dataset
 from denali_pipe.evaluate import Evaluation, baseline_score, embed, labels, load_cell, predict, score
 from denali_pipe.train import Hyper, partition, run_cell, targets
-
-from test_train import _cell, data  # noqa: F401 (the fixture)
 
 HP = Hyper(lr=3e-3, epochs=2, batch_size=32, norm="log_z")
 

@@ -9,6 +9,8 @@ import pandas as pd
 import plotly.graph_objects as go
 import pytest
 import torch
+from browser import chromium, ensure_chromium, explorer, wait_for
+from test_train import _cell, data  # noqa: F401 (the fixture)
 
 from denali_pipe.capture_sets import CaptureSet
 from denali_pipe.dataset import write_dataset
@@ -20,9 +22,6 @@ from denali_pipe.explore.predictions import error_by_location
 from denali_pipe.geometry import N_LOCATIONS, gantry_row_col
 from denali_pipe.poses.pnp import project
 from denali_pipe.train import Hyper, run_cell
-
-from browser import chromium, ensure_chromium, explorer, wait_for
-from test_train import _cell, data  # noqa: F401 (the fixture)
 
 
 def test_an_empty_results_folder_names_what_builds_each_output(tmp_path):
@@ -44,7 +43,10 @@ def test_a_missing_cell_names_its_target_or_why_it_is_never_trained(tmp_path):
     assert "never occur in training" in ill_posed.what and ill_posed.command == ""
 
 
-SETS = tuple(CaptureSet(o, s, r, li) for o, s, r, li in [("A", "4inch", "3x3", "lighton"), ("A", "4inch", "8x8", "lightoff"), ("A", "8inch", "8x8", "lighton"), ("B", "8inch", "3x3", "lighton")])
+SETS = tuple(
+    CaptureSet(o, s, r, li)
+    for o, s, r, li in [("A", "4inch", "3x3", "lighton"), ("A", "4inch", "8x8", "lightoff"), ("A", "8inch", "8x8", "lighton"), ("B", "8inch", "3x3", "lighton")]
+)
 
 
 def test_a_control_the_object_lacks_moves_to_what_it_has():

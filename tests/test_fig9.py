@@ -29,7 +29,9 @@ def data() -> tuple[Pairs, np.ndarray]:
     b = np.arange(geo.N_BINS)
     sim = np.exp(-0.5 * ((b - 90 - 20 * xy[:, :1]) / 2.0) ** 2).astype(np.float32) * 1e-2
     real = (1e3 * sim[:, None, CROP : CROP + T] + rng.normal(0, 2, (n, R, T))).astype(np.float32)
-    keys = pd.DataFrame({"set": np.repeat(["A_8inch_3x3_lighton", "1_4inch_3x3_lighton"], 15), "object": "A", "size": "8inch", "location": np.tile(np.arange(15), 2)})
+    keys = pd.DataFrame(
+        {"set": np.repeat(["A_8inch_3x3_lighton", "1_4inch_3x3_lighton"], 15), "object": "A", "size": "8inch", "location": np.tile(np.arange(15), 2)}
+    )
     return Pairs(real, sim, keys, CROP), xy
 
 

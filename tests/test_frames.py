@@ -34,8 +34,10 @@ def _visible(camera: g.Camera, tags: dict[int, g.Pose], margin_px: float = 3.0) 
         uv, z = camera.project(p.apply(g.tag_corners_local(g.TAG_SIZE)))
         facing = (camera.position - p.t) @ (-p.R[:, 2]) > 0
         inside = (
-            (uv[:, 0] >= margin_px).all() and (uv[:, 0] <= camera.width - 1 - margin_px).all()
-            and (uv[:, 1] >= margin_px).all() and (uv[:, 1] <= camera.height - 1 - margin_px).all()
+            (uv[:, 0] >= margin_px).all()
+            and (uv[:, 0] <= camera.width - 1 - margin_px).all()
+            and (uv[:, 1] >= margin_px).all()
+            and (uv[:, 1] <= camera.height - 1 - margin_px).all()
         )
         if facing and (z > 0).all() and inside and not _occluded(camera, tags, tid):
             out.add(tid)

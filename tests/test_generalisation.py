@@ -76,7 +76,9 @@ def test_histograms_pair_each_variant_with_a_base_object_at_the_same_place():
     assert set(h["location"]) == {5}
     white = h[h["pair"] == "generalization1white"]
     assert set(white.loc[white["data"] == RR, "object"]) == {"1"}  # the same class, not the first base object "A"
-    rows = variant.index[(variant["object"] == "generalization1white") & (variant["size"] == "8inch") & (variant["light"] == "lightoff") & (variant["location"] == 5)]
+    rows = variant.index[
+        (variant["object"] == "generalization1white") & (variant["size"] == "8inch") & (variant["light"] == "lightoff") & (variant["location"] == 5)
+    ]
     mine = white[white["data"] == NONRR]
     assert mine["bin"].tolist() == list(range(70, 90))
     assert np.allclose(mine["value"], xv[rows, 1, 1].mean(axis=0)) and (mine["n_samples"] == 3).all()

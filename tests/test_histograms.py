@@ -2,14 +2,13 @@
 
 import numpy as np
 import pytest
+from conftest import REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.objects import load_catalogue
 from denali_pipe.rig import histograms as H
 from denali_pipe.rig.measure import measure
 from denali_pipe.rig.scene import mount_scatterer, object_scatterer
-
-from conftest import REPO
 
 
 @pytest.fixture(scope="module")

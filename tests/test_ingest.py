@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
@@ -26,8 +27,6 @@ from denali_pipe.io.release import FRAME_DIRS
 from denali_pipe.io.store import open_set
 from denali_pipe.objects import load_catalogue
 from denali_pipe.rig import capture
-
-from conftest import REPO
 
 N_LOCATIONS, REPEATS, SCALE = 3, 3, 0.25
 OBJECT_SETS = ["A_8inch_3x3_lighton", "A_8inch_8x8_lightoff"]
@@ -488,7 +487,9 @@ def test_pickle_frame_wrong_size(good_stream, spec):
     d = records[2]["tracking_realsense_data"]
     d["aligned_depth_image"] = d["aligned_depth_image"][:, :-4]
     write_stream(path, records)
-    expect_failure(path, spec, re.escape(str(path)), GOOD, r"record 2 \(location 50\) tracking_realsense_data.aligned_depth_image: size 316x180 \(WxH\), expected 320x180")
+    expect_failure(
+        path, spec, re.escape(str(path)), GOOD, r"record 2 \(location 50\) tracking_realsense_data.aligned_depth_image: size 316x180 \(WxH\), expected 320x180"
+    )
 
 
 def test_pickle_unsafe_global(good_stream, spec, tmp_path):

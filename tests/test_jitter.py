@@ -76,8 +76,30 @@ def test_jitter_curve_has_every_task_metric_and_fwhm():
     rows = []
     for fwhm in (600, 0, 100):
         for seed, delta in ((42, 0.0), (43, 0.02)):
-            rows.append({"task": "location", "condition": jitter_condition(fwhm), "seed": seed, "test_rmse": 0.05 + fwhm / 1e4 + delta, "test_mae": 0.04, "baseline_rmse": 0.1, "baseline_mae": 0.09})
-            rows.append({"task": "size", "condition": jitter_condition(fwhm), "seed": seed, "test_precision": 0.9, "test_recall": 0.9, "test_top1": 0.9 - delta, "baseline_precision": 0.25, "baseline_recall": 0.5, "baseline_top1": 0.5})
+            rows.append(
+                {
+                    "task": "location",
+                    "condition": jitter_condition(fwhm),
+                    "seed": seed,
+                    "test_rmse": 0.05 + fwhm / 1e4 + delta,
+                    "test_mae": 0.04,
+                    "baseline_rmse": 0.1,
+                    "baseline_mae": 0.09,
+                }
+            )
+            rows.append(
+                {
+                    "task": "size",
+                    "condition": jitter_condition(fwhm),
+                    "seed": seed,
+                    "test_precision": 0.9,
+                    "test_recall": 0.9,
+                    "test_top1": 0.9 - delta,
+                    "baseline_precision": 0.25,
+                    "baseline_recall": 0.5,
+                    "baseline_top1": 0.5,
+                }
+            )
     curve = jitter_curve(pd.DataFrame(rows))
     assert list(curve.metric.unique()) == ["loc_rmse", "loc_mae", "size_precision", "size_recall", "size_accuracy"]
     rmse = curve[curve.metric == "loc_rmse"]

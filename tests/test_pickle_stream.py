@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REPO
 
 from denali_pipe.capture_sets import PICKLE_SUFFIX, parse_set_name
 from denali_pipe.io.pickle_stream import (
@@ -27,8 +28,6 @@ from denali_pipe.io.pickle_stream import (
 )
 from denali_pipe.objects import load_catalogue
 from denali_pipe.rig import capture
-
-from conftest import REPO
 
 SET = "A_8inch_3x3_lighton"
 

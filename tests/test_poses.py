@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from conftest import ASSETS, REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.capture_sets import FOLDER_SUFFIX, parse_set_name
@@ -28,8 +29,6 @@ from denali_pipe.poses.estimate import EXPECTED_TAG_IDS, check_object_coverage
 from denali_pipe.report.table6 import table6
 from denali_pipe.rig import capture
 from denali_pipe.rig.frames import frame_tags, render_frame
-
-from conftest import ASSETS, REPO
 
 LIGHTON = ["A_8inch_3x3_lighton", "A_8inch_8x8_lighton"]
 LIGHTOFF = "A_8inch_3x3_lightoff"
@@ -71,7 +70,10 @@ def _static_errors(cal, truth: dict) -> dict[int, float]:
     """Table 6's mean position against the truth per static tag, m."""
     t6 = table6(cal.filtered).set_index("tag_id")
     assert (t6["flag"] == "ok").all()
-    return {int(t): float(np.linalg.norm(t6.loc[int(t), ["x_mean_cm", "y_mean_cm", "z_mean_cm"]].to_numpy(float) / 100 - p["t"])) for t, p in truth["static_tags"].items()}
+    return {
+        int(t): float(np.linalg.norm(t6.loc[int(t), ["x_mean_cm", "y_mean_cm", "z_mean_cm"]].to_numpy(float) / 100 - p["t"]))
+        for t, p in truth["static_tags"].items()
+    }
 
 
 def _object_errors(cal, truths: list[dict]) -> np.ndarray:

@@ -5,13 +5,12 @@ for every preset and both training protocols, without a markup error."""
 from types import SimpleNamespace
 
 import pytest
+from conftest import REPO
 from docutils.core import publish_parts
 from jinja2 import Environment, StrictUndefined
+from test_config import PRESETS, load, merged
 
 from denali_pipe.conditions import TABLES as CONDITION_TABLES
-
-from conftest import REPO
-from test_config import PRESETS, load, merged
 
 CAPTIONS = sorted((REPO / "report").glob("*.rst"))
 
@@ -33,5 +32,17 @@ def test_caption_renders(caption, preset, protocol):
         # halt_level 2: a docutils warning (e.g. `|z|` read as a substitution) raises
         html = publish_parts(text, writer="html", settings_overrides={"halt_level": 2, "report_level": 5})["body"]
         assert f"{config['preset']}</tt>" in html or caption.stem == "workflow"
-        if caption.stem in ("table5", "table2", "table10", "training_curves", "speed_vs_accuracy", "condition_table", "jitter", "workflow", "fig10", "fig11", "tsne"):
+        if caption.stem in (
+            "table5",
+            "table2",
+            "table10",
+            "training_curves",
+            "speed_vs_accuracy",
+            "condition_table",
+            "jitter",
+            "workflow",
+            "fig10",
+            "fig11",
+            "tsne",
+        ):
             assert f">{protocol}</tt>" in html

@@ -12,10 +12,10 @@ from denali_pipe.report.jitter import plot_jitter
 from denali_pipe.report.paper import CONDITION_TABLES, TABLE5, TABLE10
 from denali_pipe.report.runs import load_runs
 from denali_pipe.report.speed_vs_accuracy import pareto, write_speed_vs_accuracy
-from denali_pipe.report.training_curves import write_training_curves
 from denali_pipe.report.table2 import write_table2
 from denali_pipe.report.table5 import write_table5
 from denali_pipe.report.table10 import write_table10
+from denali_pipe.report.training_curves import write_training_curves
 
 REG = {"mse": 0.0025, "rmse": 0.05, "mae": 0.04}
 CLS = {"top1": 0.5, "top5": 0.9, "precision": 0.45, "recall": 0.5, "f1": 0.47}

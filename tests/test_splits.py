@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-
 from conftest import ASSETS
+
 from denali_pipe.cells import SPLITS, is_ill_posed
 from denali_pipe.objects import BASE_SHAPES
 from denali_pipe.splits import held_out_groups, make_split, validation_split
@@ -20,7 +20,18 @@ def _samples(classes=BASE_SHAPES, n_loc=10, repeats=3):
             for light in ("lightoff", "lighton"):
                 for k in range(n_loc):
                     for r in range(repeats):
-                        rows.append({"set": f"{cls}_{size}_3x3_{light}", "class": cls, "size": size, "light": light, "location": k, "repeat": r, "x": grid[k][0], "y": grid[k][1]})
+                        rows.append(
+                            {
+                                "set": f"{cls}_{size}_3x3_{light}",
+                                "class": cls,
+                                "size": size,
+                                "light": light,
+                                "location": k,
+                                "repeat": r,
+                                "x": grid[k][0],
+                                "y": grid[k][1],
+                            }
+                        )
     return pd.DataFrame(rows).sort_values(["set", "location", "repeat"], kind="stable").reset_index(drop=True)
 
 
@@ -84,7 +95,38 @@ def test_reference_location_draw_from_the_release_labels():
     rows = [{"set": "A_4inch_3x3_lighton", "class": "A", "size": "4inch", "location": int(k[5:-5]), "repeat": 0, "x": v[0], "y": v[1]} for k, v in pos.items()]
     df = pd.DataFrame(rows).sort_values("location").reset_index(drop=True)
     s = make_split(df, "location_held_out", 42)
-    assert sorted(df.iloc[s.test]["location"]) == [1, 2, 4, 7, 10, 16, 17, 20, 23, 25, 32, 34, 39, 41, 44, 49, 52, 53, 57, 58, 59, 64, 75, 80, 81, 91, 92, 93, 95, 97]
+    assert sorted(df.iloc[s.test]["location"]) == [
+        1,
+        2,
+        4,
+        7,
+        10,
+        16,
+        17,
+        20,
+        23,
+        25,
+        32,
+        34,
+        39,
+        41,
+        44,
+        49,
+        52,
+        53,
+        57,
+        58,
+        59,
+        64,
+        75,
+        80,
+        81,
+        91,
+        92,
+        93,
+        95,
+        97,
+    ]
 
 
 @pytest.mark.parametrize("split", SPLITS)
@@ -92,7 +134,9 @@ def test_validation_is_carved_from_train_like_the_test(samples, split):
     s = make_split(samples, split, 42)
     v = validation_split(samples, s.train, split, 42, 0.2)
     assert set(v.train) | set(v.test) == set(s.train) and not set(v.train) & set(v.test)
-    cols = {"repeats_grouped": ("set", "location"), "location_held_out": ("location",), "shape_held_out": ("class",), "size_held_out": ("set", "location")}.get(split)
+    cols = {"repeats_grouped": ("set", "location"), "location_held_out": ("location",), "shape_held_out": ("class",), "size_held_out": ("set", "location")}.get(
+        split
+    )
     if cols:
         assert not _groups(samples, v.train, cols) & _groups(samples, v.test, cols)
 

@@ -170,18 +170,24 @@ def _bad_write(out: Path, action) -> Exception:
 
 WRITER_CASES = [
     ("duplicate", lambda w: w.write_location(0, *fake_location(0)), "location 0: duplicated location"),
-    ("shape", lambda w: w.write_location(1, np.zeros((3, 8, 8, 128), np.int32), fake_location(1)[1]),
-     r"histogram shape \(3, 8, 8, 128\), expected \(3, 3, 3, 128\)"),
-    ("dtype", lambda w: w.write_location(1, fake_location(1)[0].astype(float), fake_location(1)[1]),
-     "histogram dtype float64, expected int32"),
-    ("frame size", lambda w: w.write_location(1, fake_location(1)[0], fake_location(1, shapes={**SHAPES, "tracking_depth": (9, 9)})[1]),
-     r"tracking_depth frame is 9x9 \(WxH\), expected 32x18"),
-    ("frame dtype", lambda w: w.write_location(1, fake_location(1)[0], {**fake_location(1)[1], "colocated_depth": np.zeros((12, 21), np.float32)}),
-     r"colocated_depth frame \(12, 21\) float32"),
-    ("modalities", lambda w: w.write_location(1, fake_location(1)[0], {"tracking_rgb": fake_location(1)[1]["tracking_rgb"]}),
-     "but earlier locations had"),
-    ("unknown", lambda w: w.write_location(1, fake_location(1)[0], {**fake_location(1)[1], "thermal": np.zeros(3)}),
-     "unknown frame modalities"),
+    (
+        "shape",
+        lambda w: w.write_location(1, np.zeros((3, 8, 8, 128), np.int32), fake_location(1)[1]),
+        r"histogram shape \(3, 8, 8, 128\), expected \(3, 3, 3, 128\)",
+    ),
+    ("dtype", lambda w: w.write_location(1, fake_location(1)[0].astype(float), fake_location(1)[1]), "histogram dtype float64, expected int32"),
+    (
+        "frame size",
+        lambda w: w.write_location(1, fake_location(1)[0], fake_location(1, shapes={**SHAPES, "tracking_depth": (9, 9)})[1]),
+        r"tracking_depth frame is 9x9 \(WxH\), expected 32x18",
+    ),
+    (
+        "frame dtype",
+        lambda w: w.write_location(1, fake_location(1)[0], {**fake_location(1)[1], "colocated_depth": np.zeros((12, 21), np.float32)}),
+        r"colocated_depth frame \(12, 21\) float32",
+    ),
+    ("modalities", lambda w: w.write_location(1, fake_location(1)[0], {"tracking_rgb": fake_location(1)[1]["tracking_rgb"]}), "but earlier locations had"),
+    ("unknown", lambda w: w.write_location(1, fake_location(1)[0], {**fake_location(1)[1], "thermal": np.zeros(3)}), "unknown frame modalities"),
     ("error in block", lambda w: (_ for _ in ()).throw(ValueError("boom")), "boom"),
 ]
 

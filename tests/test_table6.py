@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import ASSETS, REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.poses import estimate_frames, filter_estimates
@@ -13,8 +14,6 @@ from denali_pipe.report.paper import TABLE6
 from denali_pipe.report.table6 import TAG_IDS, table6, write_table6
 from denali_pipe.rig.frames import frame_tags, render_frame
 from denali_pipe.rig.tracked_scene import tracked_scene
-
-from conftest import ASSETS, REPO
 
 PAPER_CSV = REPO.parent / "shared" / "paper" / "table6_paper.csv"
 

@@ -7,18 +7,20 @@ import json
 
 import numpy as np
 import pytest
+from conftest import ASSETS
 
 from denali_pipe import geometry as geo
 from denali_pipe.rig.tracked_scene import WALL_GAP_M, design_scene, release_scene, tracked_scene
-
-from conftest import ASSETS
 
 POSES_JSON = ASSETS / "poses.json"
 
 
 def _doc() -> dict:
     """A minimal valid poses.json: the design's static tags and gantry grid."""
-    pose = lambda p: {"center": p.t.tolist(), "rotation_matrix": p.R.tolist()}
+
+    def pose(p):
+        return {"center": p.t.tolist(), "rotation_matrix": p.R.tolist()}
+
     return {
         "tracking_avgposes": {str(i): pose(p) for i, p in geo.STATIC_TAGS.items()},
         "tracking_tag1_index_avgposes": {str(k): pose(geo.tag1_pose(k)) for k in range(geo.N_LOCATIONS)},

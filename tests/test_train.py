@@ -8,10 +8,10 @@ import pandas as pd
 import pytest
 import torch
 
-from denali_pipe.classical import run_linear
-from denali_pipe.preprocess import normalise
 from denali_pipe.cells import Cell
+from denali_pipe.classical import run_linear
 from denali_pipe.models import build_model
+from denali_pipe.preprocess import normalise
 from denali_pipe.train import Hyper, fit, loss_for, partition, run_cell, targets
 
 CLASSES = ("A", "B", "circle")
@@ -34,7 +34,20 @@ def data():
                         centre = 4 + 12 * (y - 0.2) / 0.0365 + 2 * (k % 4)
                         bump = (50 if size == "8inch" else 20) * np.exp(-0.5 * ((t - centre) / (1 + ci)) ** 2)
                         xs.append(bump[None, None, :] * np.ones((3, 3, 1)) + rng.normal(0, 3, (3, 3, BINS)))
-                        rows.append({"set": f"{cls}_{size}_3x3_{light}", "object": cls, "class": cls, "type": "letter", "size": size, "light": light, "location": k, "repeat": r, "x": x, "y": y})
+                        rows.append(
+                            {
+                                "set": f"{cls}_{size}_3x3_{light}",
+                                "object": cls,
+                                "class": cls,
+                                "type": "letter",
+                                "size": size,
+                                "light": light,
+                                "location": k,
+                                "repeat": r,
+                                "x": x,
+                                "y": y,
+                            }
+                        )
     return np.stack(xs).astype(np.float32), pd.DataFrame(rows)
 
 
@@ -146,4 +159,3 @@ def test_fit_keeps_the_best_scoring_epoch_or_the_last(data, caplog):
     assert [r.getMessage().split(",")[0] for r in caplog.records] == [f"probe: epoch {e}/3" for e in (1, 2, 3)]
     net = build_model("cnn1d", "location", n=3, bins=BINS, n_classes=2)
     assert fit(net, xt, yt, hp, 0, loss_for("location")).best_epoch == 3
-

@@ -29,9 +29,9 @@ from denali_pipe.transforms import (
     build_pairs,
     check_fit,
     fit_transforms,
+    reach,
     read_fit_check,
     read_transforms,
-    reach,
     scale,
     shifted_copies,
     split_pairs,
@@ -332,7 +332,14 @@ def test_split_keeps_captures_whole_and_is_seeded():
 
 def test_transforms_file_round_trip_and_bad_file(tmp_path):
     t = Transforms(3.0, 0.9, tuple(np.full(KERNEL_BINS, 1 / KERNEL_BINS)), 1.2, 40.0)
-    boot = Bootstrap(20, 42, 0.9, {**dict.fromkeys(SCALARS, 0.1), "kernel": [0.01] * KERNEL_BINS}, {**dict.fromkeys(SCALARS, [0.5, 1.5]), "kernel": [[0.0, 0.2]] * KERNEL_BINS}, 0.03)
+    boot = Bootstrap(
+        20,
+        42,
+        0.9,
+        {**dict.fromkeys(SCALARS, 0.1), "kernel": [0.01] * KERNEL_BINS},
+        {**dict.fromkeys(SCALARS, [0.5, 1.5]), "kernel": [[0.0, 0.2]] * KERNEL_BINS},
+        0.03,
+    )
     check = FitCheck(1.5, boot, {"a_noise": 0.3, "b_noise": 2.0}, {"a_noise": "standard error 25.0% of its value (more than 10.0%)"})
     write_transforms(tmp_path / "t.json", t, check, {"n_pairs": 1})
     assert read_transforms(tmp_path / "t.json") == t

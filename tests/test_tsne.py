@@ -5,11 +5,10 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from test_train import _cell, data  # noqa: F401 (the fixture)
 
 from denali_pipe.experiments.tsne import N_CLASSES, pick_classes, run_tsne, separability, unseen_rows, write_tsne
 from denali_pipe.train import Hyper, partition, run_cell, targets
-
-from test_train import _cell, data  # noqa: F401 (the fixture)
 
 
 def test_classes_are_drawn_with_the_seed_among_the_8in_lights_off_ones():

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.objects import load_catalogue, object_mesh
@@ -19,8 +20,6 @@ from denali_pipe.twin.layout import (
     twin_scene,
     zone_footprint,
 )
-
-from conftest import REPO
 
 LOCATIONS = (0, 45, 99)
 

@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.cli import main
@@ -14,8 +15,6 @@ from denali_pipe.objects import front_samples, load_catalogue, object_mesh
 from denali_pipe.twin.analytic import AnalyticRenderer
 from denali_pipe.twin.layout import load_calibration, nominal_scene, pixel_centres, twin_scene
 from denali_pipe.twin.render import read_twin, render_twin
-
-from conftest import REPO
 
 LOCATIONS = (0, 9, 55, 99)  # near/far from the wall, both ends of the gantry
 SETTINGS = {

@@ -7,11 +7,10 @@ import itertools
 
 import pytest
 import yaml
+from workflow import copy_workflow, dry_runs, merged_config
 
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
 from denali_pipe.objects import load_catalogue
-
-from workflow import copy_workflow, dry_runs, merged_config
 
 PRESETS = {"tiny": ("config/presets/tiny.yaml",), "demo": (), "paper": ("config/presets/paper.yaml",)}
 SOURCES = ("synthetic", "release", "pickle")

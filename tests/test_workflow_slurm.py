@@ -8,7 +8,6 @@ import threading
 import time
 
 import pytest
-
 from slurm_cluster import SlurmUnavailable, local_slurm
 from workflow import copy_workflow, job_counts, snakemake
 

@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from workflow import copy_workflow, merged_config, snakemake
 
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
 from denali_pipe.cells import SPLITS, TASKS, is_ill_posed
@@ -19,8 +20,6 @@ from denali_pipe.io.store import open_set
 from denali_pipe.objects import BACKGROUNDS, load_catalogue
 from denali_pipe.report.runs import METRICS, NA
 from denali_pipe.rig.capture import synth_sets
-
-from workflow import copy_workflow, merged_config, snakemake
 
 pytestmark = pytest.mark.e2e
 TARGET = "results/table5.csv"

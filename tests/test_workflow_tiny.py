@@ -5,9 +5,11 @@ import re
 import shutil
 import time
 
+import browser
 import numpy as np
 import pandas as pd
 import pytest
+from workflow import copy_workflow, job_counts, snakemake
 
 from denali_pipe.capture_sets import expected_sets
 from denali_pipe.conditions import TABLES as CONDITION_TABLES
@@ -18,9 +20,6 @@ from denali_pipe.io.store import open_set
 from denali_pipe.objects import load_catalogue
 from denali_pipe.transforms import FIDELITIES
 from denali_pipe.twin.render import read_twin
-
-import browser
-from workflow import copy_workflow, job_counts, snakemake
 
 pytestmark = pytest.mark.e2e
 TINY = ("--configfile", "config/presets/tiny.yaml")
@@ -396,7 +395,13 @@ def tree_state(root):
 
 def _changed(driver, element_id, old, timeout=browser.WAIT_S):
     """Wait until an element's text differs from `old` and no callback is pending; its new text."""
-    return browser.wait_for(driver, f"const e = document.getElementById(arguments[0]); return e.innerText !== arguments[1] && ({browser.IDLE}) && e.innerText;", element_id, old, timeout=timeout)
+    return browser.wait_for(
+        driver,
+        f"const e = document.getElementById(arguments[0]); return e.innerText !== arguments[1] && ({browser.IDLE}) && e.innerText;",
+        element_id,
+        old,
+        timeout=timeout,
+    )
 
 
 def _timed(driver, action, element_id):

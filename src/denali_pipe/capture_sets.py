@@ -44,10 +44,7 @@ def parse_set_name(name: str) -> CaptureSet:
     stem = name.removesuffix(FOLDER_SUFFIX).removesuffix(PICKLE_SUFFIX)
     m = _NAME.fullmatch(stem)
     if m is None:
-        raise ValueError(
-            f"capture set name {name!r} does not parse: expected "
-            "<object>_<4inch|8inch>_<3x3|8x8>_<lighton|lightoff>[_NLOSdata]"
-        )
+        raise ValueError(f"capture set name {name!r} does not parse: expected <object>_<4inch|8inch>_<3x3|8x8>_<lighton|lightoff>[_NLOSdata]")
     return CaptureSet(m["object"], m["size"], m["res"], m["light"])
 
 

@@ -91,6 +91,7 @@ def cmd_training_report(args: argparse.Namespace) -> None:
         write_training_curves(paths, task, args.title, out)
     log.info("wrote %s from %d cells", out, len(paths))
 
+
 def cmd_table4(args: argparse.Namespace) -> None:
     from denali_pipe.report.table4 import write_table4
 
@@ -195,7 +196,9 @@ def cmd_dataset(args: argparse.Namespace) -> None:
     from denali_pipe.io.features import read_features
     from denali_pipe.objects import load_catalogue
 
-    x, samples = build_dataset([Path(p) for p in args.features], load_catalogue(args.objects_sheet), location_labels(pd.read_parquet(args.positions)), args.variant)
+    x, samples = build_dataset(
+        [Path(p) for p in args.features], load_catalogue(args.objects_sheet), location_labels(pd.read_parquet(args.positions)), args.variant
+    )
     write_dataset(x, samples, Path(args.out), Path(args.table), read_features(Path(args.features[0]))[1].crop_start)
     log.info("wrote %s %s and %s", args.out, x.shape, args.table)
 
@@ -307,7 +310,15 @@ def cmd_transforms(args: argparse.Namespace) -> None:
         "bootstrap_seconds": t2 - t1,
     }
     write_transforms(Path(args.out), t, check, record)
-    log.info("wrote %s: %s, peak SNR %.2f, identifiable %s (%.1f s, of which the bootstrap %.1f s)", args.out, t.to_dict(), check.peak_snr, check.identifiable, t2 - t0, t2 - t1)
+    log.info(
+        "wrote %s: %s, peak SNR %.2f, identifiable %s (%.1f s, of which the bootstrap %.1f s)",
+        args.out,
+        t.to_dict(),
+        check.peak_snr,
+        check.identifiable,
+        t2 - t0,
+        t2 - t1,
+    )
 
 
 def cmd_fig9(args: argparse.Namespace) -> None:
@@ -386,6 +397,8 @@ def cmd_tsne(args: argparse.Namespace) -> None:
     table = run_tsne([Path(d) for d in args.runs], x, samples, args.seed)
     write_tsne(table, args.title, Path(args.out))
     log.info("wrote %s and its CSV:\n%s", args.out, table[table["row"] != "point"].dropna(axis=1, how="all").to_string(index=False))
+
+
 def cmd_jitter(args: argparse.Namespace) -> None:
     from denali_pipe.experiments.jitter import jitter_curve
     from denali_pipe.report.jitter import plot_jitter
@@ -565,7 +578,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="output JSON: the cell's metrics and its baseline's on the dataset")
     s.set_defaults(func=cmd_evaluate)
 
-    for name, what in (("fig10", "Fig 10: non-RR objects' returns, and base 1D CNN cells scored on them"), ("fig11", "Fig 11: base 1D CNN cells scored on the italic objects")):
+    for name, what in (
+        ("fig10", "Fig 10: non-RR objects' returns, and base 1D CNN cells scored on them"),
+        ("fig11", "Fig 11: base 1D CNN cells scored on the italic objects"),
+    ):
         s = sub.add_parser(name, help=what)
         s.add_argument("--cells", nargs="+", required=True, help="the cells' metrics.json (their own test scores)")
         s.add_argument("--evaluations", nargs="+", required=True, help="`denali evaluate` JSONs of those cells on the variant dataset")

@@ -34,7 +34,9 @@ def location_labels(positions: pd.DataFrame) -> dict[int, tuple[float, float]]:
     return {int(r.location): (float(r.x), float(r.y)) for r in positions.itertuples()}
 
 
-def build_dataset(feature_paths: list[Path], catalogue: dict[str, ObjectSpec], labels: dict[int, tuple[float, float]], variant: str = "base") -> tuple[np.ndarray, pd.DataFrame]:
+def build_dataset(
+    feature_paths: list[Path], catalogue: dict[str, ObjectSpec], labels: dict[int, tuple[float, float]], variant: str = "base"
+) -> tuple[np.ndarray, pd.DataFrame]:
     """Stack the sets' features into (N, n, n, T) float32 and their sample table.
 
     Every set must share one resolution and crop window; the label of every

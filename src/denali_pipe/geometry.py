@@ -291,11 +291,13 @@ _COLOCATED_FWD = _v(0.451, 0.889, -0.072)
 # (0.006, 0.634, -0.774): the frame then just holds tag 5's printed margin at
 # the top and tag 14's at the bottom, as the real capture's tag check needs.
 TRACKING_CAMERA = Camera(
-    "tracking", Intrinsics(1280, 720, 923.57, 923.94, 641.69, 365.96),
+    "tracking",
+    Intrinsics(1280, 720, 923.57, 923.94, 641.69, 365.96),
     *look_at(_TRACKING_POS, (0.006, 0.6236, -0.7817)),
 )
 COLOCATED_CAMERA = Camera(
-    "colocated", Intrinsics(848, 480, 605.79, 605.37, 426.69, 247.06),
+    "colocated",
+    Intrinsics(848, 480, 605.79, 605.37, 426.69, 247.06),
     *look_at(_COLOCATED_POS, _COLOCATED_FWD),
 )
 

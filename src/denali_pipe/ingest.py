@@ -112,9 +112,7 @@ def ingest_release(set_dir: Path, out: Path, spec: ObjectSpec | None) -> pd.Data
     meta = _Metadata.check(metadata, cs, md_path, require_locations=True)
 
     hist_paths = _listed_files(set_dir / HISTOGRAM_DIR, ".npy", meta.locations, cs)
-    frame_paths = {
-        m: _listed_files(set_dir / m, ".png", meta.locations, cs) for m in FRAME_DIRS if (set_dir / m).exists()
-    }
+    frame_paths = {m: _listed_files(set_dir / m, ".png", meta.locations, cs) for m in FRAME_DIRS if (set_dir / m).exists()}
 
     def locations() -> Iterator[_Location]:
         for k in meta.locations:
@@ -309,8 +307,7 @@ def check_histogram(h: np.ndarray, where: str, cs: CaptureSet, repeats: int | No
         if bad.any():
             n_nan = int(np.isnan(h).sum())
             raise ValueError(
-                f"{where}: float counts with {n_nan} NaN and {int(bad.sum()) - n_nan} infinite values; "
-                "expected finite, non-negative, integral counts"
+                f"{where}: float counts with {n_nan} NaN and {int(bad.sum()) - n_nan} infinite values; expected finite, non-negative, integral counts"
             )
     neg = h < 0
     if neg.any():

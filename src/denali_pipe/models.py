@@ -145,10 +145,7 @@ class CNN3dShallow(nn.Module):
             nn.GELU(),
             nn.Flatten(),
         )
-        m, _, t = (
-            (size + 2 * p - k) // s + 1
-            for size, k, s, p in zip((n, n, bins), self.KERNEL, self.STRIDE, self.PADDING)
-        )
+        m, _, t = ((size + 2 * p - k) // s + 1 for size, k, s, p in zip((n, n, bins), self.KERNEL, self.STRIDE, self.PADDING))
         self.head = _mlp_head([self.CHANNELS * m * m * t, 512, 256, 128], n_out)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -185,13 +182,9 @@ class Transformer(nn.Module):
         self.cls = nn.Parameter(torch.zeros(1, 1, d))
         self.input_norm = nn.LayerNorm(d)
         self.input_dropout = nn.Dropout(DROPOUT)
-        layer = nn.TransformerEncoderLayer(
-            d, self.N_HEADS, self.D_FF, DROPOUT, activation="gelu", batch_first=True, norm_first=True
-        )
+        layer = nn.TransformerEncoderLayer(d, self.N_HEADS, self.D_FF, DROPOUT, activation="gelu", batch_first=True, norm_first=True)
         # Nested tensors only apply to post-LN layers; disabling them avoids a warning.
-        self.encoder = nn.TransformerEncoder(
-            layer, self.N_LAYERS, norm=nn.LayerNorm(d), enable_nested_tensor=False
-        )
+        self.encoder = nn.TransformerEncoder(layer, self.N_LAYERS, norm=nn.LayerNorm(d), enable_nested_tensor=False)
         head_norm = [nn.LayerNorm(d)] if classifier else []
         self.head = nn.Sequential(*head_norm, *_mlp_head([d, 128], n_out))
 

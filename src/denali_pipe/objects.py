@@ -17,10 +17,10 @@ Units: metres throughout; areas m^2.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import functools
 import math
 import os
-import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -217,9 +217,7 @@ def load_catalogue(path: str | os.PathLike, schema: str | os.PathLike | None = N
             problems.append(f"{where}, column 'class': expected one of BASE_SHAPES, got {doc['class']!r}")
             continue
         if doc["type"] != class_type(doc["class"]):
-            problems.append(
-                f"{where}, column 'type': expected {class_type(doc['class'])!r} for class {doc['class']!r}, got {doc['type']!r}"
-            )
+            problems.append(f"{where}, column 'type': expected {class_type(doc['class'])!r} for class {doc['class']!r}, got {doc['type']!r}")
             continue
         mesh = doc["mesh"]
         if mesh and len(doc["sizes"]) > 1 and "{" not in mesh:
@@ -353,10 +351,7 @@ def outline(cls: str, size: str, italic: bool = False) -> Polygon | MultiPolygon
 
 
 def _extrude(geom: Polygon | MultiPolygon, thickness: float) -> trimesh.Trimesh:
-    parts = [
-        trimesh.creation.extrude_polygon(p, thickness, mid_plane=True, engine="earcut")
-        for p in getattr(geom, "geoms", [geom])
-    ]
+    parts = [trimesh.creation.extrude_polygon(p, thickness, mid_plane=True, engine="earcut") for p in getattr(geom, "geoms", [geom])]
     return parts[0] if len(parts) == 1 else trimesh.util.concatenate(parts)
 
 

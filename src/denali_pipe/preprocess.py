@@ -144,7 +144,9 @@ def crop_window(backgrounds: list[np.ndarray], fraction: float = DIRECT_END_FRAC
     if not backgrounds:
         raise ValueError("crop_window needs at least one background set")
     n = backgrounds[0].shape[2]
-    ends = np.stack([direct_end(b.mean(axis=(0, 1), dtype=np.float64).reshape(-1, b.shape[-1]), b.shape[0] * b.shape[1], fraction) for b in backgrounds]).max(axis=0)
+    ends = np.stack([direct_end(b.mean(axis=(0, 1), dtype=np.float64).reshape(-1, b.shape[-1]), b.shape[0] * b.shape[1], fraction) for b in backgrounds]).max(
+        axis=0
+    )
     if (ends < 0).all():
         raise ValueError("no zone of the background sets shows a significant direct return")
     start = int(ends[ends >= 0].min())

@@ -222,7 +222,9 @@ def fit(
     return Fitted(best_state, best_epoch, epoch, seen, train_seconds, over_budget)
 
 
-def run_cell(x: np.ndarray, samples: pd.DataFrame, cell: Cell, hp: Hyper, validation_fraction: float, device: str = "cpu", budget_seconds: float | None = None) -> Result:
+def run_cell(
+    x: np.ndarray, samples: pd.DataFrame, cell: Cell, hp: Hyper, validation_fraction: float, device: str = "cpu", budget_seconds: float | None = None
+) -> Result:
     """Train one cell on (N, n, n, T) features `x` with sample table `samples`
     (`fit`, with the selection metric of `selection_key` on the validation
     part or, under `paper`, the test split; `budget_seconds` as there)."""

@@ -284,7 +284,9 @@ def fit_mean(real_mean: np.ndarray, weights: np.ndarray, sim: np.ndarray, crop_s
         gamma = float(minimize_scalar(lambda g: best_c(g)[1], bounds=GAMMA_BOUNDS, method="bounded", options={"xatol": 1e-6}).x)
     c, _ = best_c(gamma)
     if not c.sum() > 0:
-        raise ValueError("fit_transforms: the best scale is 0 (no scaled twin correlates positively with the real counts); the real captures hold no object signal")
+        raise ValueError(
+            "fit_transforms: the best scale is 0 (no scaled twin correlates positively with the real counts); the real captures hold no object signal"
+        )
     return float(c.sum() / s_ref**gamma), gamma, c / c.sum()
 
 

@@ -227,4 +227,3 @@ def fig11(cells: list[CellMetrics], evaluations: list[Evaluation], out_png: Path
     fig.tight_layout()
     save_figure(fig, out_png, table)
     return table
-

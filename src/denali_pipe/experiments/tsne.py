@@ -130,7 +130,10 @@ def write_tsne(table: pd.DataFrame, title: str, out_png: Path) -> None:
         for colour, cls in zip(("tab:blue", "tab:orange", "tab:green"), classes):
             p = points[points["class"] == cls]
             ax.scatter(p["tsne_1"], p["tsne_2"], s=14, color=colour, label=cls, alpha=0.8)
-        ax.set_title(f"seed {int(s.seed)}: {NEIGHBOURS}-NN accuracy {s.knn_accuracy:.2f}, silhouette {s.silhouette:.2f}\n({int(s.n_samples)} unseen test samples)", fontsize=8)
+        ax.set_title(
+            f"seed {int(s.seed)}: {NEIGHBOURS}-NN accuracy {s.knn_accuracy:.2f}, silhouette {s.silhouette:.2f}\n({int(s.n_samples)} unseen test samples)",
+            fontsize=8,
+        )
         ax.set_xlabel("t-SNE 1 (arbitrary units)")
         ax.set_ylabel("t-SNE 2 (arbitrary units)")
         ax.legend(fontsize=7, title="class", title_fontsize=7)

@@ -21,7 +21,22 @@ from denali_pipe.cells import PROTOCOLS, SPLITS
 from denali_pipe.explore import capture as cap
 from denali_pipe.explore import figures as figs
 from denali_pipe.explore.outputs import (
-    ALL_STORES, BENCHMARK_CELLS, POSITIONS, TRANSFORMS, CellChoice, Inventory, Missing, benchmark_objects, crop_path, dataset_paths, features_path, index_path, scan, store_path, target, twin_path,
+    ALL_STORES,
+    BENCHMARK_CELLS,
+    POSITIONS,
+    TRANSFORMS,
+    CellChoice,
+    Inventory,
+    Missing,
+    benchmark_objects,
+    crop_path,
+    dataset_paths,
+    features_path,
+    index_path,
+    scan,
+    store_path,
+    target,
+    twin_path,
 )  # fmt: skip
 from denali_pipe.explore.predictions import ERROR_METRIC, capture_output, error_by_location, trained_cell
 from denali_pipe.objects import BACKGROUNDS, SIZES
@@ -127,7 +142,10 @@ def banner(missing: list[Missing]) -> html.Div:
 
 
 def _labelled(label: str, control) -> html.Div:
-    return html.Div([html.Label(label, style={"fontWeight": "bold", "marginRight": "6px"}), control], style={"display": "inline-block", "marginRight": "18px", "verticalAlign": "middle"})
+    return html.Div(
+        [html.Label(label, style={"fontWeight": "bold", "marginRight": "6px"}), control],
+        style={"display": "inline-block", "marginRight": "18px", "verticalAlign": "middle"},
+    )
 
 
 def _radio(id_: str, values: tuple[str, ...], value: str) -> dcc.RadioItems:
@@ -156,34 +174,47 @@ def layout(root: Path) -> html.Div:
         children=[
             html.H3(f"DENALI capture explorer: {root}"),
             banner(inv.missing()),
-            html.Div([
-                _labelled("object", dcc.Dropdown(id="object", options=options, value=first, clearable=False, style={"width": "320px"})),
-                _labelled("size", _radio("size", tuple(SIZES), START["size"])),
-                _labelled("resolution", _radio("resolution", tuple(geo.RESOLUTIONS), START["resolution"])),
-                _labelled("lighting", _radio("light", LIGHTINGS, START["light"])),
-                _labelled("repeat", dcc.RadioItems(id="repeat", inline=True, value=0, inputStyle={"marginRight": "3px", "marginLeft": "8px"})),
-            ]),
-            html.Div([
-                _labelled("cell: protocol", _dropdown("protocol", "90px")),
-                _labelled("split", _dropdown("split", "170px")),
-                _labelled("model", _dropdown("model", "120px")),
-                _labelled("seed", _dropdown("seed", "80px")),
-                _labelled("heat map", _radio("heat", TASKS, TASKS[0])),
-                _labelled("histograms", _radio("yscale", ("linear", "log"), "log")),
-                _labelled("theme", _radio("theme", tuple(THEMES), "light")),
-            ], style={"marginTop": "6px"}),
-            html.Div([
-                html.Label("gantry location", style={"fontWeight": "bold", "marginRight": "6px"}),
-                # a step to the previous or next captured location, as the reference GUI's frame buttons
-                html.Button("◀", id="previous", title="previous captured location"), html.Button("▶", id="next", title="next captured location"),
-                dcc.Slider(id="location", min=0, max=geo.N_LOCATIONS - 1, step=None, marks={}, value=START["location"]),
-            ], style={"marginTop": "6px"}),
+            html.Div(
+                [
+                    _labelled("object", dcc.Dropdown(id="object", options=options, value=first, clearable=False, style={"width": "320px"})),
+                    _labelled("size", _radio("size", tuple(SIZES), START["size"])),
+                    _labelled("resolution", _radio("resolution", tuple(geo.RESOLUTIONS), START["resolution"])),
+                    _labelled("lighting", _radio("light", LIGHTINGS, START["light"])),
+                    _labelled("repeat", dcc.RadioItems(id="repeat", inline=True, value=0, inputStyle={"marginRight": "3px", "marginLeft": "8px"})),
+                ]
+            ),
+            html.Div(
+                [
+                    _labelled("cell: protocol", _dropdown("protocol", "90px")),
+                    _labelled("split", _dropdown("split", "170px")),
+                    _labelled("model", _dropdown("model", "120px")),
+                    _labelled("seed", _dropdown("seed", "80px")),
+                    _labelled("heat map", _radio("heat", TASKS, TASKS[0])),
+                    _labelled("histograms", _radio("yscale", ("linear", "log"), "log")),
+                    _labelled("theme", _radio("theme", tuple(THEMES), "light")),
+                ],
+                style={"marginTop": "6px"},
+            ),
+            html.Div(
+                [
+                    html.Label("gantry location", style={"fontWeight": "bold", "marginRight": "6px"}),
+                    # a step to the previous or next captured location, as the reference GUI's frame buttons
+                    html.Button("◀", id="previous", title="previous captured location"),
+                    html.Button("▶", id="next", title="next captured location"),
+                    dcc.Slider(id="location", min=0, max=geo.N_LOCATIONS - 1, step=None, marks={}, value=START["location"]),
+                ],
+                style={"marginTop": "6px"},
+            ),
             dcc.Store(id="selection"),
             html.Div(id="messages"),
-            html.Table(id="readout", children=[
-                html.Tr([html.Th(h) for h in ("", "ground truth", "prediction", "")]),
-                *[html.Tr([html.Th(task), html.Td(id=f"truth-{task}"), html.Td(id=f"pred-{task}"), html.Td(id=f"note-{task}")]) for task in READOUT],
-            ], style={"margin": "6px 0", "fontSize": "14px"}),
+            html.Table(
+                id="readout",
+                children=[
+                    html.Tr([html.Th(h) for h in ("", "ground truth", "prediction", "")]),
+                    *[html.Tr([html.Th(task), html.Td(id=f"truth-{task}"), html.Td(id=f"pred-{task}"), html.Td(id=f"note-{task}")]) for task in READOUT],
+                ],
+                style={"margin": "6px 0", "fontSize": "14px"},
+            ),
             html.Div(
                 [_panel(p) for p in PANELS],
                 style={"display": "grid", "gridTemplateColumns": "repeat(3, minmax(0, 1fr))", "gap": "6px"},
@@ -285,7 +316,9 @@ def histograms_panel(inv: Inventory, sel: Selection, log_y: bool, template: str)
     n = sel.cs.n_zones
     detail = f"dotted: {bg_set.name}'s mean" if background is not None else f"no background: {target(store_path(bg_set.name))}"
     detail += "; dashed: each zone's first kept bin" if window is not None else f"; no crop window: {target(crop_path(sel.cs.resolution))}"
-    return figs.histogram_grid(counts, background, None if window is None else window.zone_starts, log_y, figs.title(f"Raw {n}x{n} histograms, repeat {sel.repeat}", detail), template)
+    return figs.histogram_grid(
+        counts, background, None if window is None else window.zone_starts, log_y, figs.title(f"Raw {n}x{n} histograms, repeat {sel.repeat}", detail), template
+    )
 
 
 def centre_panel(inv: Inventory, sel: Selection, template: str):
@@ -299,7 +332,11 @@ def centre_panel(inv: Inventory, sel: Selection, template: str):
         zones, main, detail = [(n // 2, n // 2)], "Centre zone, preprocessed", "dashed: the twin after the fitted scale and blur"
     else:
         # no single centre zone: the four around the centre; the twin models the 3x3 centre zone only
-        zones, main, detail = [(r, c) for r in (n // 2 - 1, n // 2) for c in (n // 2 - 1, n // 2)], "Central 2x2 zones, preprocessed", "no twin: it models the 3x3 centre zone"
+        zones, main, detail = (
+            [(r, c) for r in (n // 2 - 1, n // 2) for c in (n // 2 - 1, n // 2)],
+            "Central 2x2 zones, preprocessed",
+            "no twin: it models the 3x3 centre zone",
+        )
     twin = None
     if n == 3:
         if (sel.cs.object, sel.cs.size) not in inv.twins:
@@ -367,7 +404,6 @@ def messages(items: list[Missing]) -> list:
 
 
 # --- the app ----------------------------------------------------------------------------------
-
 
 
 def build_app(root: Path) -> Dash:

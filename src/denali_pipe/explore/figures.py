@@ -91,9 +91,22 @@ def histogram_grid(counts: np.ndarray, background: np.ndarray | None, zone_start
             # a log axis labels whole decades only: 2 and 5 between them do not fit an 8x8 grid's subplots
             layout[f"yaxis{k}"].update(dict(type="log", dtick=1) if log_y else dict(type="linear"))
             axes = dict(xaxis=f"x{k}", yaxis=f"y{k}")
-            data.append(dict(type="scatter", x=b, y=counts[r, c], name="capture", legendgroup="capture", showlegend=first, line=dict(color=MEASURED, width=1), **axes))
+            data.append(
+                dict(type="scatter", x=b, y=counts[r, c], name="capture", legendgroup="capture", showlegend=first, line=dict(color=MEASURED, width=1), **axes)
+            )
             if background is not None:
-                data.append(dict(type="scatter", x=b, y=background[r, c], name="background (mean)", legendgroup="bg", showlegend=first, line=dict(color=BACKGROUND, width=1, dash="dot"), **axes))
+                data.append(
+                    dict(
+                        type="scatter",
+                        x=b,
+                        y=background[r, c],
+                        name="background (mean)",
+                        legendgroup="bg",
+                        showlegend=first,
+                        line=dict(color=BACKGROUND, width=1, dash="dot"),
+                        **axes,
+                    )
+                )
             if zone_starts is not None:
                 start = int(zone_starts[r, c])
                 shapes.append(dict(type="line", xref=f"x{k}", yref=f"y{k} domain", x0=start, x1=start, y0=0, y1=1, line=dict(color=TWIN, width=1, dash="dash")))
@@ -119,7 +132,14 @@ def centre_figure(first_bin: int, repeats: np.ndarray, chosen: int, twin: np.nda
     if twin is not None:
         fig.add_trace(go.Scatter(x=t, y=twin, name="twin, fitted scale and blur", line=dict(color=TWIN, width=2, dash="dash")))
     fig.add_hline(y=0, line=dict(color=BACKGROUND, width=1))
-    fig.update_layout(template=template, title=heading, margin=MARGIN, xaxis_title=BIN_AXIS, yaxis_title="counts above background", legend=dict(orientation="h", y=-0.2, yanchor="top"))
+    fig.update_layout(
+        template=template,
+        title=heading,
+        margin=MARGIN,
+        xaxis_title=BIN_AXIS,
+        yaxis_title="counts above background",
+        legend=dict(orientation="h", y=-0.2, yanchor="top"),
+    )
     return fig
 
 
@@ -129,7 +149,16 @@ def bars_figure(classes: list[str], probabilities: np.ndarray, truth: str | None
     order = np.argsort(-probabilities)[:top]
     names = [classes[i] for i in order]
     colours = [TRUTH if name == truth else OTHER for name in names]
-    fig = go.Figure(go.Bar(x=100 * probabilities[order], y=names, orientation="h", marker_color=colours, text=[f"{100 * p:.1f} %" for p in probabilities[order]], textposition="auto"))
+    fig = go.Figure(
+        go.Bar(
+            x=100 * probabilities[order],
+            y=names,
+            orientation="h",
+            marker_color=colours,
+            text=[f"{100 * p:.1f} %" for p in probabilities[order]],
+            textposition="auto",
+        )
+    )
     fig.update_layout(
         template=template, title=heading, margin=MARGIN, xaxis=dict(title="probability (%)", range=[0, 100]),
         yaxis=dict(autorange="reversed", type="category"),
@@ -138,8 +167,15 @@ def bars_figure(classes: list[str], probabilities: np.ndarray, truth: str | None
 
 
 def grid_figure(
-    grid: pd.DataFrame, captured: np.ndarray, error: pd.DataFrame | None, error_label: str,
-    truth_xy: np.ndarray | None, predicted_xy: np.ndarray | None, location: int, heading: dict, template: str,
+    grid: pd.DataFrame,
+    captured: np.ndarray,
+    error: pd.DataFrame | None,
+    error_label: str,
+    truth_xy: np.ndarray | None,
+    predicted_xy: np.ndarray | None,
+    location: int,
+    heading: dict,
+    template: str,
 ) -> go.Figure:
     """The 10 x 10 gantry grid in the world frame (m): `grid`
     (`capture.gantry_grid`) with the set's `captured` locations marked, the
@@ -170,11 +206,37 @@ def grid_figure(
             hovertemplate=f"location %{{customdata[0]}}: {error_label} %{{customdata[1]:.1f}}, %{{customdata[2]}} test samples<extra></extra>",
         ))  # fmt: skip
     if truth_xy is not None:
-        fig.add_trace(go.Scatter(x=[truth_xy[0]], y=[truth_xy[1]], customdata=[location], mode="markers", name=f"ground truth (location {location})", marker=dict(color=TRUTH, size=22, symbol="circle-open", line=dict(width=3))))
+        fig.add_trace(
+            go.Scatter(
+                x=[truth_xy[0]],
+                y=[truth_xy[1]],
+                customdata=[location],
+                mode="markers",
+                name=f"ground truth (location {location})",
+                marker=dict(color=TRUTH, size=22, symbol="circle-open", line=dict(width=3)),
+            )
+        )
     if predicted_xy is not None:
-        fig.add_trace(go.Scatter(x=[predicted_xy[0]], y=[predicted_xy[1]], mode="markers", name="prediction", marker=dict(color=PREDICTED, size=16, symbol="x-thin-open", line=dict(width=3))))
+        fig.add_trace(
+            go.Scatter(
+                x=[predicted_xy[0]],
+                y=[predicted_xy[1]],
+                mode="markers",
+                name="prediction",
+                marker=dict(color=PREDICTED, size=16, symbol="x-thin-open", line=dict(width=3)),
+            )
+        )
         if truth_xy is not None:
-            fig.add_trace(go.Scatter(x=[truth_xy[0], predicted_xy[0]], y=[truth_xy[1], predicted_xy[1]], mode="lines", showlegend=False, hoverinfo="skip", line=dict(color=PREDICTED, width=1)))
+            fig.add_trace(
+                go.Scatter(
+                    x=[truth_xy[0], predicted_xy[0]],
+                    y=[truth_xy[1], predicted_xy[1]],
+                    mode="lines",
+                    showlegend=False,
+                    hoverinfo="skip",
+                    line=dict(color=PREDICTED, width=1),
+                )
+            )
     fig.update_layout(
         template=template, title=heading, margin=MARGIN, legend=dict(orientation="h", y=-0.2, yanchor="top"),
         xaxis=dict(title="x (m)"), yaxis=dict(title="y (m)", scaleanchor="x"),

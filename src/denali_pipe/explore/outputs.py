@@ -134,7 +134,9 @@ class Inventory:
             out.append(Missing(f"no {res} benchmark dataset (per-location test error)", target(dataset_paths(res)[0])))
         no_features = sorted(s.name for s in objects if s.name not in self.features)
         if no_features:
-            out.append(Missing(f"no features for {len(no_features)} of {len(objects)} object sets, e.g. {no_features[0]}", target(features_path(no_features[0]))))
+            out.append(
+                Missing(f"no features for {len(no_features)} of {len(objects)} object sets, e.g. {no_features[0]}", target(features_path(no_features[0])))
+            )
         no_twin = sorted({(s.object, s.size) for s in objects} - self.twins)
         if no_twin:
             out.append(Missing(f"no digital twin for {len(no_twin)} object sizes, e.g. {' '.join(no_twin[0])}", target(twin_path(*no_twin[0]))))

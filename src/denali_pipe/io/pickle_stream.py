@@ -160,15 +160,9 @@ def _load_one(f, path: Path, index: int) -> Any:
             raise
         raise UnsafePickleError(f"{path}: record {index}: {e}") from None
     except (EOFError, pickle.UnpicklingError) as e:
-        raise ValueError(
-            f"{path}: record {index} is cut or corrupt ({type(e).__name__}: {e}); "
-            "the stream ends mid-record (truncated file?)"
-        ) from None
+        raise ValueError(f"{path}: record {index} is cut or corrupt ({type(e).__name__}: {e}); the stream ends mid-record (truncated file?)") from None
     except MemoryError:
-        raise ValueError(
-            f"{path}: record {index} could not be unpickled: out of memory "
-            "(a corrupt length field, or a record larger than memory)"
-        ) from None
+        raise ValueError(f"{path}: record {index} could not be unpickled: out of memory (a corrupt length field, or a record larger than memory)") from None
     except Exception as e:  # noqa: BLE001 -- any other failure is a malformed record
         raise ValueError(f"{path}: record {index} does not unpickle ({type(e).__name__}: {e})") from None
 

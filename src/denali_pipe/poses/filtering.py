@@ -89,9 +89,7 @@ def group_keys(df: pd.DataFrame) -> pd.Series:
     return pd.Series(list(zip(df["tag_id"].astype(int), loc)), index=df.index)
 
 
-def filter_estimates(
-    estimates: pd.DataFrame, *, threshold: float = THRESHOLD, method: str = DEFAULT_METHOD, columns=POSITION_COLUMNS
-) -> pd.DataFrame:
+def filter_estimates(estimates: pd.DataFrame, *, threshold: float = THRESHOLD, method: str = DEFAULT_METHOD, columns=POSITION_COLUMNS) -> pd.DataFrame:
     """The `ok` estimates of `estimates` with two added columns: `kept` (bool,
     survived the rejection) and `group_n` (estimates in its group before
     rejection). Groups: per static tag, and per (object tag, location)."""

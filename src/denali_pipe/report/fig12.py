@@ -124,9 +124,7 @@ def write_fig12(
     return data
 
 
-def write_fig12_from_store(
-    store: Path, estimates: pd.DataFrame, filtered: pd.DataFrame, out_png: Path, *, location: int | None = None, **kw
-) -> pd.DataFrame:
+def write_fig12_from_store(store: Path, estimates: pd.DataFrame, filtered: pd.DataFrame, out_png: Path, *, location: int | None = None, **kw) -> pd.DataFrame:
     """Figure 12 for a frame of the capture store `store`: `estimates` must hold
     that set's rows (a pooled table will do); location: which frame (default:
     the set's first)."""

@@ -76,7 +76,9 @@ def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, crop: int, 
         real = real_centre_histogram(store, bg, location)
         sim = twin.histogram(location)
         frame = store.frame("tracking_rgb", store.index_of(location))[..., ::-1]  # BGR -> RGB
-        view = twin_view(mi, cal, twin, location, frame.shape[:2], config["fig18"]["rgb_spp"], derive_seed(config["seed"], "fig18", store.name, location) % 2**32)
+        view = twin_view(
+            mi, cal, twin, location, frame.shape[:2], config["fig18"]["rgb_spp"], derive_seed(config["seed"], "fig18", store.name, location) % 2**32
+        )
 
         ax_row[0].imshow(frame)
         ax_row[0].set_title(f"{store.name} @ {location}: tracking frame", fontsize=8)

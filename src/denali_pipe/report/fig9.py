@@ -19,7 +19,13 @@ from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.transforms import FIDELITIES
 
 METRICS = ("rmse", "mse", "mae", "rmse_euclidean")
-LABELS = {"raw": "raw simulation", "scaled": "scaled", "blurred": "scaled + blurred", "noisy": "scaled + blurred + noisy", MEAN_BASELINE: "predict the training mean"}
+LABELS = {
+    "raw": "raw simulation",
+    "scaled": "scaled",
+    "blurred": "scaled + blurred",
+    "noisy": "scaled + blurred + noisy",
+    MEAN_BASELINE: "predict the training mean",
+}
 ROWS = (*FIDELITIES, MEAN_BASELINE)  # the table's order of `fidelity`
 
 

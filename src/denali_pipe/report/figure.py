@@ -22,7 +22,9 @@ DPI = 110
 __all__ = ["plt", "save_figure"]
 
 
-def save_figure(fig: plt.Figure, png: Path, table: pd.DataFrame | None = None, csv: Path | None = None, dpi: int = DPI, float_format: str | None = None) -> None:
+def save_figure(
+    fig: plt.Figure, png: Path, table: pd.DataFrame | None = None, csv: Path | None = None, dpi: int = DPI, float_format: str | None = None
+) -> None:
     """Write `fig` to `png` and close it; write `table` (the numbers the
     figure plots) to `csv`, by default the PNG's path with `.csv`, floats as
     `float_format` (pandas' default: every digit). Each file appears

@@ -26,7 +26,21 @@ from denali_pipe.rig.measure import measure
 CENTRE_ZONE = (1, 1)
 # The panels show counts up to this fraction of the direct peak: the bump lives there.
 ZOOM = 0.25
-COLUMNS = ("source", "set", "location", "floor_before", "floor_after", "late_over_floor", "direct_peak", "floor_fraction", "bump_excess", "bump_fraction", "bump_over_floor", "bump_bin", "bump_fwhm")
+COLUMNS = (
+    "source",
+    "set",
+    "location",
+    "floor_before",
+    "floor_after",
+    "late_over_floor",
+    "direct_peak",
+    "floor_fraction",
+    "bump_excess",
+    "bump_fraction",
+    "bump_over_floor",
+    "bump_bin",
+    "bump_fwhm",
+)
 
 
 def mid_location(locations: list[int]) -> int:

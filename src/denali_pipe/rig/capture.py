@@ -30,7 +30,6 @@ import pickle
 from contextlib import ExitStack
 from functools import partial
 from pathlib import Path
-from typing import Iterator
 
 import cv2
 import numpy as np

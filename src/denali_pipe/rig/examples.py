@@ -85,11 +85,19 @@ def rig_examples(pairs: list[tuple[Path, Path]], out_png: Path) -> None:
                 ax.legend(fontsize=7, loc="upper left")
                 twin.legend(fontsize=7, loc="upper right")
             for b in bins:
-                rows.append({
-                    "set": cs.name, "location": k, "zone_row": zone[0], "zone_col": zone[1], "bin": b,
-                    "object_mean": obj[b], "background_mean": bg[b], "difference": diff[b],
-                    "difference_smoothed": smooth[b],
-                    "in_predicted_window": lo <= b <= hi,
-                })
+                rows.append(
+                    {
+                        "set": cs.name,
+                        "location": k,
+                        "zone_row": zone[0],
+                        "zone_col": zone[1],
+                        "bin": b,
+                        "object_mean": obj[b],
+                        "background_mean": bg[b],
+                        "difference": diff[b],
+                        "difference_smoothed": smooth[b],
+                        "in_predicted_window": lo <= b <= hi,
+                    }
+                )
     fig.tight_layout()
     save_figure(fig, out_png, pd.DataFrame(rows))

@@ -148,8 +148,10 @@ def _irradiance(points: np.ndarray, normal: np.ndarray, light_on: bool) -> np.nd
 def _camera_key(camera: Camera) -> tuple:
     # Camera holds arrays, so it is not hashable: key on its defining numbers.
     return (
-        camera.name, camera.intrinsics,
-        np.asarray(camera.R_wc, float).tobytes(), np.asarray(camera.t_wc, float).tobytes(),
+        camera.name,
+        camera.intrinsics,
+        np.asarray(camera.R_wc, float).tobytes(),
+        np.asarray(camera.t_wc, float).tobytes(),
     )
 
 
@@ -287,9 +289,7 @@ def frame_tags(
     return {**scene.static_tags, g.OBJECT_TAG_ID: Pose(tag1.R, tag1.t + np.asarray(gantry_offset, float))}
 
 
-def _draw_tag(
-    img: np.ndarray, depth: np.ndarray, bg: _Background, camera: Camera, tag_id: int, tag_pose: Pose, light_on: bool
-) -> None:
+def _draw_tag(img: np.ndarray, depth: np.ndarray, bg: _Background, camera: Camera, tag_id: int, tag_pose: Pose, light_on: bool) -> None:
     """Composite one tag into `img` (H, W, 3) radiance and `depth` (H, W) m in place."""
     normal_out = -tag_pose.R[:, 2]  # tag z points into the tag
     if (bg.origin - tag_pose.t) @ normal_out <= 0:

@@ -35,7 +35,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-
 from scipy.special import log_ndtr, ndtr
 
 from denali_pipe import geometry as geo
@@ -223,8 +222,6 @@ def _add_diffuse(hist, zone, r_q, seen, g_oq, d_oq, sc: Scatterer) -> None:
     for ip in range(len(p)):
         opl = base_opl + (r_p[ip] + dist_po[ip])[o_index]
         _splat(hist, zones, opl, (radiance_o[ip][:, None] * w_oq).ravel())
-
-
 
 
 def pulse_kernel(phot: Photometry, shift_bins: float = 0.0) -> np.ndarray:

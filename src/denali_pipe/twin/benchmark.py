@@ -100,7 +100,10 @@ def benchmark_scenes(specs: list[ObjectSpec], sizes: list[str], locations: list[
 
 def configurations(bench: dict, with_analytic: bool) -> list[Configuration]:
     configs = [Configuration("paper", "mitransient", "wall", int(bench["paper_spp"]))]
-    configs += [Configuration(f"footprint {spp // 1000}k" if spp % 1000 == 0 else f"footprint {spp}", "mitransient", "footprint", int(spp)) for spp in bench["footprint_spp"]]
+    configs += [
+        Configuration(f"footprint {spp // 1000}k" if spp % 1000 == 0 else f"footprint {spp}", "mitransient", "footprint", int(spp))
+        for spp in bench["footprint_spp"]
+    ]
     if with_analytic:
         configs.append(Configuration("analytic", "analytic", "footprint", None))
     return configs

@@ -66,6 +66,8 @@ def configure_llvm(environ: MutableMapping[str, str] = os.environ, candidates: I
         return given
     path, tried = find_libllvm(candidates)
     if path is None:
-        raise FileNotFoundError(f"no usable libLLVM for drjit's CPU backend: {ENV} is unset and nothing matches {', '.join(tried) or '(no patterns)'}; {INSTALL_HINT}")
+        raise FileNotFoundError(
+            f"no usable libLLVM for drjit's CPU backend: {ENV} is unset and nothing matches {', '.join(tried) or '(no patterns)'}; {INSTALL_HINT}"
+        )
     environ[ENV] = path
     return path

@@ -56,10 +56,7 @@ def _register_table_safe_integrator(mi: ModuleType) -> None:
             order = np.asarray(self.hidden_geometry_shape_indices, dtype=np.int64)
             hidden = [shapes[i] for i in order]
             others = sum(s.surface_area()[0] for s in hidden if s.id() != "object" and s != relay)
-            weights = [
-                0.0 if s == relay else OBJECT_SHARE if s.id() == "object" else (1 - OBJECT_SHARE) * s.surface_area()[0] / others
-                for s in hidden
-            ]
+            weights = [0.0 if s == relay else OBJECT_SHARE if s.id() == "object" else (1 - OBJECT_SHARE) * s.surface_area()[0] / others for s in hidden]
             self.hidden_geometries_distribution = mi.DiscreteDistribution(weights)
             return samplers
 
