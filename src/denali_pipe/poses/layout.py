@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import partial
 
 import cv2
 import numpy as np
@@ -262,7 +263,7 @@ def solve_layout(corners: dict[int, np.ndarray], K: np.ndarray) -> tuple[Fit, di
             return None
         model = _Model(ids, cam0)
         obs = {i: corners[i] for i in ids}
-        sol = least_squares(_residuals, model.x0, args=(model, obs, K), method="lm", x_scale="jac")
+        sol = least_squares(partial(_residuals, model), model.x0, args=(obs, K), method="lm", x_scale="jac")
         per_tag = {i: float(np.sqrt(np.mean(r**2))) for i, r in zip(ids, sol.fun.reshape(len(ids), 8))}
         worst = max((i for i in ids if i != geo.WORLD_ORIGIN_TAG_ID), key=per_tag.get, default=None)
         limit = max(OUTLIER_PX, 4 * float(np.median(list(per_tag.values()))))
