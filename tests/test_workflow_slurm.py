@@ -15,7 +15,7 @@ pytestmark = pytest.mark.slurm
 TINY = ("--configfile", "config/presets/tiny.yaml")
 TARGET = "results/table5.csv"
 # the cell SLURM kills: nothing but Table 5 depends on it
-VICTIM = "clean_3x3_random_cnn1d_location_42"
+VICTIM = "clean_3x3_all_random_cnn1d_location_42"
 VICTIM_DIR = "results/runs/clean/3x3/all/random/cnn1d_location/seed42"
 
 
