@@ -523,18 +523,20 @@ def test_explorer_in_a_browser(tiny_run, tmp_path):
         check_panels("A_8inch_3x3_lighton", target)
         driver.save_screenshot(str(shots / "4_grid_click.png"))
 
-        # a held-out variant: the base shape's class; rule all builds no features for it, and the page says what does
+        # a held-out variant: the base shape's class; rule all builds its 3x3 features (Fig 10 scores the cells on them),
+        # so the benchmark's cells predict it like any capture
         variant = "generalization1white"
         assert _timed(driver, lambda: pick(variant), "truth-shape")[1] == "1"
-        assert f"snakemake --cores all results/features/{variant}_8inch_3x3_lighton.zarr" in browser.text(driver, "messages")
-        assert browser.text(driver, "pred-shape") == ""
+        assert f"results/features/{variant}_8inch_3x3_lighton.zarr" not in browser.text(driver, "messages")
+        assert browser.text(driver, "pred-shape") in cells["shape"].classes
         driver.save_screenshot(str(shots / "5_variant.png"))
 
-        # 8x8 in the dark theme: the raw 8x8 histograms; the cells, trained at 3x3 only, say what builds one
+        # 8x8 in the dark theme: the raw 8x8 histograms; rule all builds the variant's features at 3x3 only (Fig 10),
+        # so the page names the target that builds its 8x8 ones
         driver.find_element(By.XPATH, "//div[@id='theme']//input[@value='dark']").click()
         driver.find_element(By.XPATH, "//div[@id='resolution']//input[@value='8x8']").click()
         notes = _changed(driver, "messages", browser.text(driver, "messages"))
-        assert "no training cell at 8x8" in notes and "results/runs/clean/8x8/all/random/cnn1d_location/seed42/metrics.json" in notes
+        assert f"snakemake --cores all results/features/{variant}_8inch_8x8_lighton.zarr" in notes, notes
         assert browser.figure(driver, "histograms")["n_traces"] == 2 * 64  # the capture and the background's mean in each zone
         page = driver.page_source
         driver.save_screenshot(str(shots / "6_8x8_dark.png"))
