@@ -19,7 +19,7 @@ def plot_jitter(curve: pd.DataFrame, title: str, png: Path) -> None:
     """`experiments.jitter.jitter_curve`'s table as one panel per task; the
     table goes beside the PNG as CSV."""
     tasks = [t for t in TASK_TITLES if t in set(curve["task"])]
-    fig, axes = plt.subplots(1, len(tasks), figsize=(4.2 * len(tasks), 3.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(tasks), figsize=(4.2 * len(tasks), 4.3), squeeze=False)
     for ax, task in zip(axes[0], tasks):
         sub = curve[curve["task"] == task]
         for colour, (metric, m) in zip(COLOURS, sub.groupby("metric", sort=False)):
@@ -31,10 +31,13 @@ def plot_jitter(curve: pd.DataFrame, title: str, png: Path) -> None:
         ax.set_title(TASK_TITLES[task], fontsize=9)
         ax.set_xlabel("timing jitter FWHM (ps)")
         ax.set_ylabel(Y_LABELS[task])
+        if task != "location":
+            ax.set_ylim(0, 1)  # scores: their whole range
         top = ax.secondary_xaxis("top", functions=(lambda ps: ps / BIN_WIDTH_PS, lambda b: b * BIN_WIDTH_PS))
         top.set_xlabel(f"FWHM (bins of {BIN_WIDTH_PS:.0f} ps)", fontsize=8)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, title="dashed: trivial predictor", title_fontsize=7)
+        # below the panel, where no curve runs
+        ax.legend(fontsize=7, title="dashed: trivial predictor", title_fontsize=7, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.3))
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     save_figure(fig, png, curve)
