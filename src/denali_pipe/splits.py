@@ -26,7 +26,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from sklearn.model_selection import train_test_split
 
 from denali_pipe.cells import SPLITS
 
@@ -92,6 +91,9 @@ def make_split(samples: pd.DataFrame, split: str, seed: int, stratify: np.ndarra
     _check(samples, split)
     rows = np.arange(len(samples))
     if split == "random":
+        # imported here: scikit-learn costs ~1 CPU-s per process, and only this split draws through it
+        from sklearn.model_selection import train_test_split
+
         train, test = train_test_split(rows, test_size=test_fraction, random_state=seed, stratify=stratify)
         return Split(np.sort(train), np.sort(test))
     if split == "size_held_out":
