@@ -1,4 +1,4 @@
-"""The tiny preset's Table 5 on a real single-node SLURM cluster, through
+"""Table 5 (the tiny preset cut to REDUCED) on a real single-node SLURM cluster, through
 `profiles/slurm`: every job is a SLURM job, a job killed by SLURM fails alone
 (--keep-going), and the rerun runs exactly that job and its dependents."""
 
@@ -9,11 +9,9 @@ import time
 
 import pytest
 from slurm_cluster import SlurmUnavailable, local_slurm
-from workflow import copy_workflow, job_counts, snakemake
+from workflow import TABLE5, copy_workflow, job_counts, reduced_configfiles, snakemake
 
 pytestmark = pytest.mark.slurm
-TINY = ("--configfile", "config/presets/tiny.yaml")
-TARGET = "results/table5.csv"
 # the cell SLURM kills: nothing but Table 5 depends on it
 VICTIM = "clean_3x3_all_random_cnn1d_location_42"
 VICTIM_DIR = "results/runs/clean/3x3/all/random/cnn1d_location/seed42"
@@ -53,6 +51,7 @@ def mtimes(wd) -> dict[str, int]:
 
 def test_table5_on_slurm_and_a_killed_job_reruns_alone(cluster, tmp_path):
     wd = copy_workflow(tmp_path)
+    config = reduced_configfiles(wd)
     run = ("--profile", "profiles/slurm", *cluster.snakemake_args, "--jobs", "4")
 
     stop = threading.Event()
@@ -61,7 +60,7 @@ def test_table5_on_slurm_and_a_killed_job_reruns_alone(cluster, tmp_path):
     killer.start()
     start = time.perf_counter()
     try:
-        first = snakemake(wd, TARGET, *run, "--keep-going", *TINY, check=False)
+        first = snakemake(wd, TABLE5, *run, "--keep-going", *config, check=False)
     finally:
         stop.set()
         killer.join()
@@ -69,26 +68,26 @@ def test_table5_on_slurm_and_a_killed_job_reruns_alone(cluster, tmp_path):
     log = first.stdout + first.stderr
     assert first.returncode != 0 and len(cancelled) == 1, log[-3000:]
     assert f"SLURM-job '{cancelled[0]}' failed" in log
-    assert not (wd / TARGET).exists() and not (wd / VICTIM_DIR / "metrics.json").exists()
+    assert not (wd / TABLE5).exists() and not (wd / VICTIM_DIR / "metrics.json").exists()
 
     # every job ran as a SLURM job: slurmctld accepted each submission and saw
     # each end (the killed one may have been cancelled before it started)
     jobs = submissions(log)
     assert set(jobs) == cluster.job_ids_submitted() and cancelled[0] in jobs
     assert set(jobs) - set(cancelled) <= cluster.job_ids_completed()
-    # the profile's groups batch the 58 jobs of the tiny Table 5 DAG into fewer submissions
+    # the profile's groups batch the Table 5 DAG's 41 jobs into fewer submissions
     kinds = {re.sub(r"_(ingest|poses|rig|preprocess)", "", name) for name in jobs.values()}
     assert {"group_capture", "group_features", "rule_crop_window", "rule_calibrate", "rule_dataset", "rule_train"} == kinds
     assert len(jobs) < 30
 
     # the rerun: exactly the killed cell and Table 5, nothing else touched
-    dry = snakemake(wd, TARGET, "-n", *TINY).stdout
+    dry = snakemake(wd, TABLE5, "-n", *config).stdout
     counts = job_counts(dry)
     assert counts == {"train": 1, "table5": 1, "total": 2}
     assert VICTIM_DIR in dry
     before = mtimes(wd)
     start = time.perf_counter()
-    second = snakemake(wd, TARGET, *run, *TINY)
+    second = snakemake(wd, TABLE5, *run, *config)
     print(f"SLURM: first run {len(jobs)} SLURM jobs in {first_s:.0f} s; rerun {time.perf_counter() - start:.0f} s")
     rerun = submissions(second.stdout + second.stderr)
     assert sorted(rerun.values()) == ["rule_table5", "rule_train"]
@@ -100,4 +99,4 @@ def test_table5_on_slurm_and_a_killed_job_reruns_alone(cluster, tmp_path):
     after = mtimes(wd)
     touched = {k for k in before if after.get(k) != before[k]}
     assert touched == set(), sorted(touched)
-    assert (wd / TARGET).exists() and (wd / VICTIM_DIR / "metrics.json").exists()
+    assert (wd / TABLE5).exists() and (wd / VICTIM_DIR / "metrics.json").exists()

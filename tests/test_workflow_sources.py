@@ -9,8 +9,7 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-import yaml
-from workflow import copy_workflow, merged_config, snakemake
+from workflow import TABLE5, copy_workflow, merged_config, reduced_configfiles, snakemake
 
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
 from denali_pipe.cells import SPLITS, TASKS, is_ill_posed
@@ -22,26 +21,7 @@ from denali_pipe.report.runs import METRICS, NA
 from denali_pipe.rig.capture import synth_sets
 
 pytestmark = pytest.mark.e2e
-TARGET = "results/table5.csv"
-# The tiny preset cut to what still draws every Table 5 split and task: three
-# base shapes (shape_held_out tests one and carves validation from the other
-# two), both sizes (size_held_out), one resolution and lighting (Table 5 is
-# 3x3 and pools lightings; the calibration needs lights on), six gantry
-# locations (location_held_out: 4 train, 1 of them validation, 2 test), one epoch.
-REDUCED = {
-    "objects": ["1", "A", "circle"],
-    "resolutions": ["3x3"],
-    "lightings": ["lighton"],
-    "rig": {"n_locations": 6},
-    "train": {"max_epochs": 1},
-}
 SOURCES = ("release", "pickle")
-
-
-def configfiles(wd, raw) -> tuple[str, ...]:
-    """`--configfile` arguments: the tiny preset, then REDUCED reading and writing `raw`."""
-    (wd / "sources.yaml").write_text(yaml.safe_dump({**REDUCED, "raw_dir": str(raw)}))
-    return ("--configfile", "config/presets/tiny.yaml", "sources.yaml")
 
 
 def write_streams(sets: list[CaptureSet], cfg: dict, raw, catalogue) -> None:
@@ -65,7 +45,7 @@ def runs(tmp_path_factory):
     for source in SOURCES:
         (root / source).mkdir()
         workdirs[source] = copy_workflow(root / source)
-    args = {source: configfiles(wd, raw) for source, wd in workdirs.items()}
+    args = {source: reduced_configfiles(wd, raw_dir=str(raw)) for source, wd in workdirs.items()}
     wd = workdirs["release"]
     cfg = merged_config(wd, *args["release"][1:])
     catalogue = load_catalogue(wd / cfg["objects_sheet"])
@@ -76,10 +56,10 @@ def runs(tmp_path_factory):
     with ThreadPoolExecutor(2) as pool:
         # the README's rehearsal: the rig's part of the DAG only (of Table 5's: this
         # cut-down config lacks the sets that rule all's Figs 10/11/13/14 need)
-        rig = pool.submit(snakemake, wd, TARGET, "--until", "rig", "--cores", "2", *args["release"], "--config", "source=synthetic", "rig={layout: public}")
+        rig = pool.submit(snakemake, wd, TABLE5, "--until", "rig", "--cores", "2", *args["release"], "--config", "source=synthetic", "rig={layout: public}")
         write_streams(sets, cfg, raw, catalogue)
         rig.result()
-        tables = [pool.submit(snakemake, wd, TARGET, "--cores", "2", *args[source], "--config", f"source={source}") for source, wd in workdirs.items()]
+        tables = [pool.submit(snakemake, wd, TABLE5, "--cores", "2", *args[source], "--config", f"source={source}") for source, wd in workdirs.items()]
         for table in tables:
             table.result()
     return workdirs, raw, sets, cfg
@@ -101,7 +81,7 @@ def test_the_raw_tree_is_the_published_layout_and_the_streams(runs):
 @pytest.mark.parametrize("source", SOURCES)
 def test_table5_has_every_split_and_task(runs, source):
     workdirs, *_ = runs
-    t5 = pd.read_csv(workdirs[source] / TARGET, keep_default_na=False).set_index("split")
+    t5 = pd.read_csv(workdirs[source] / TABLE5, keep_default_na=False).set_index("split")
     assert list(t5.index) == list(SPLITS)
     assert set(t5["protocol"]) == {"clean"} and set(t5["resolution"]) == {"3x3"}
     for name, (task, _) in METRICS.items():

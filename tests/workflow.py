@@ -17,6 +17,20 @@ from pathlib import Path
 from conftest import REPO
 
 WORKFLOW_FILES = ("Snakefile", "rules", "config", "profiles", "envs", "report")
+TABLE5 = "results/table5.csv"
+# The tiny preset cut to what still draws every Table 5 split and task: three
+# base shapes (shape_held_out tests one and carves validation from the other
+# two), both sizes (size_held_out), one resolution and lighting (Table 5 is
+# 3x3 and pools lightings; the calibration needs lights on), six gantry
+# locations (location_held_out: 4 train, 1 of them validation, 2 test), one
+# epoch. The end-to-end runs that need Table 5 only (the sources, SLURM) use it.
+REDUCED = {
+    "objects": ["1", "A", "circle"],
+    "resolutions": ["3x3"],
+    "lightings": ["lighton"],
+    "rig": {"n_locations": 6},
+    "train": {"max_epochs": 1},
+}
 
 
 def copy_workflow(dest: Path) -> Path:
@@ -28,6 +42,15 @@ def copy_workflow(dest: Path) -> Path:
         else:
             shutil.copy2(src, dest / name)
     return dest
+
+
+def reduced_configfiles(workdir: Path, **settings) -> tuple[str, ...]:
+    """`--configfile` arguments for a Table 5 run on REDUCED: the tiny preset,
+    then REDUCED with `settings` over it (written to `workdir`/reduced.yaml)."""
+    import yaml
+
+    (workdir / "reduced.yaml").write_text(yaml.safe_dump({**REDUCED, **settings}))
+    return ("--configfile", "config/presets/tiny.yaml", "reduced.yaml")
 
 
 def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
