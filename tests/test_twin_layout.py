@@ -9,7 +9,8 @@ import pytest
 from conftest import REPO
 
 from denali_pipe import geometry as geo
-from denali_pipe.objects import load_catalogue, object_mesh
+from denali_pipe.meshes import object_mesh
+from denali_pipe.objects import load_catalogue
 from denali_pipe.twin.layout import (
     front_face,
     laser_spot,

@@ -11,7 +11,8 @@ from conftest import REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.cli import main
-from denali_pipe.objects import front_samples, load_catalogue, object_mesh
+from denali_pipe.meshes import front_samples, object_mesh
+from denali_pipe.objects import load_catalogue
 from denali_pipe.twin.analytic import AnalyticRenderer
 from denali_pipe.twin.layout import load_calibration, nominal_scene, pixel_centres, twin_scene
 from denali_pipe.twin.render import read_twin, render_twin

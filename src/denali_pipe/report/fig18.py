@@ -24,7 +24,8 @@ import pandas as pd
 
 from denali_pipe import geometry as geo
 from denali_pipe.io.store import CaptureStore, open_set
-from denali_pipe.objects import object_mesh, spec_from_dict
+from denali_pipe.meshes import object_mesh
+from denali_pipe.objects import spec_from_dict
 from denali_pipe.preprocess import subtract_background
 from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.seeds import derive_seed, rng_for

@@ -14,7 +14,7 @@ o/x along o-x; the spot counts as one unit of area, as in mitransient's laser
 sampling). Each term lands in the bin of its sensor-relative optical path
 |s - p| + |p - o| + |o - x| + |x - s| (a box filter, as the mitransient
 renderer's). The object is quadrature points on its wall-facing face
-(`objects.front_samples`); a plane plate cannot shadow itself and nothing
+(`meshes.front_samples`); a plane plate cannot shadow itself and nothing
 else is in the scene, so the sum is exact up to quadrature.
 
 Units: radiance per unit laser intensity, per bin; the mitransient renderer
@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from denali_pipe import geometry as geo
-from denali_pipe.objects import front_samples
+from denali_pipe.meshes import front_samples
 from denali_pipe.twin.layout import TwinScene, pixel_centres
 
 

@@ -35,7 +35,8 @@ import numpy as np
 import pandas as pd
 
 from denali_pipe.geometry import Rect
-from denali_pipe.objects import ObjectSpec, object_mesh
+from denali_pipe.meshes import object_mesh
+from denali_pipe.objects import ObjectSpec
 from denali_pipe.seeds import derive_seed, rng_for
 from denali_pipe.twin.layout import Calibration, pixels_inside, twin_scene, zone_footprint
 from denali_pipe.twin.render import make_renderer

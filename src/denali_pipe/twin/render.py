@@ -29,7 +29,8 @@ import zarr
 
 from denali_pipe import geometry as geo
 from denali_pipe.atomic import atomic_dir
-from denali_pipe.objects import ObjectSpec, object_mesh
+from denali_pipe.meshes import object_mesh
+from denali_pipe.objects import ObjectSpec
 from denali_pipe.seeds import derive_seed
 from denali_pipe.twin.layout import TwinScene, load_calibration, twin_scene
 
