@@ -9,7 +9,6 @@ import pandas as pd
 
 from denali_pipe.cell_metrics import CellMetrics
 
-CELL_COLUMNS = ("model", "task", "split", "resolution", "condition", "protocol")
 # Table metric name -> (task, metric key in metrics.json); the paper's columns.
 METRICS = {
     "loc_rmse": ("location", "rmse"),
