@@ -46,10 +46,16 @@ def copy_workflow(dest: Path) -> Path:
 
 def reduced_configfiles(workdir: Path, **settings) -> tuple[str, ...]:
     """`--configfile` arguments for a Table 5 run on REDUCED: the tiny preset,
-    then REDUCED with `settings` over it (written to `workdir`/reduced.yaml)."""
-    import yaml
+    then REDUCED with `settings` merged over it key by key (written to
+    `workdir`/reduced.yaml)."""
+    import copy
 
-    (workdir / "reduced.yaml").write_text(yaml.safe_dump({**REDUCED, **settings}))
+    import yaml
+    from snakemake.utils import update_config
+
+    config = copy.deepcopy(REDUCED)
+    update_config(config, settings)
+    (workdir / "reduced.yaml").write_text(yaml.safe_dump(config))
     return ("--configfile", "config/presets/tiny.yaml", "reduced.yaml")
 
 
