@@ -329,7 +329,14 @@ def centre_panel(inv: Inventory, sel: Selection, template: str):
     feats, first_bin = cap.capture_features(inv, sel.cs, sel.location)
     n = sel.cs.n_zones
     if n % 2:
-        zones, main, detail = [(n // 2, n // 2)], "Centre zone, preprocessed", "dashed: the twin after the fitted scale and blur"
+        zones, main, detail = (
+            [(n // 2, n // 2)],
+            "Centre zone, preprocessed",
+            (
+                # the same Lambertian plate for every material: on a non-RR object it is no prediction of the return
+                "dashed: the twin (a Lambertian plate) after the scale and blur fitted on the benchmark's objects"
+            ),
+        )
     else:
         # no single centre zone: the four around the centre; the twin models the 3x3 centre zone only
         zones, main, detail = (
