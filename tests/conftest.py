@@ -8,6 +8,14 @@ ASSETS = REPO.parent / "shared" / "denali-assets"
 
 
 @pytest.fixture(scope="session")
+def catalogue():
+    """The objects sheet's specs ({name: ObjectSpec}, frozen)."""
+    from denali_pipe.objects import load_catalogue
+
+    return load_catalogue(REPO / "config" / "objects.tsv")
+
+
+@pytest.fixture(scope="session")
 def demo_config() -> dict:
     """The default (demo) config as Snakemake sees it after validation."""
     with open(REPO / "config" / "config.yaml") as f:

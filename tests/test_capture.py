@@ -30,11 +30,6 @@ FLOOR_BINS = slice(0, 20)  # sensor-relative OPL < 0.47 m: before any wall retur
 
 
 @pytest.fixture(scope="module")
-def catalogue():
-    return load_catalogue(REPO / "config" / "objects.tsv")
-
-
-@pytest.fixture(scope="module")
 def small_config(demo_config):
     cfg = copy.deepcopy(demo_config)
     cfg["rig"]["n_locations"] = N_LOCATIONS

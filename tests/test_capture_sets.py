@@ -18,13 +18,7 @@ from denali_pipe.capture_sets import (
     parse_set_name,
     select_objects,
 )
-from denali_pipe.objects import BACKGROUNDS, load_catalogue
-
-
-@pytest.fixture(scope="module")
-def catalogue():
-    return load_catalogue(REPO / "config" / "objects.tsv")
-
+from denali_pipe.objects import BACKGROUNDS
 
 # --- parse_set_name ------------------------------------------------------------------
 

@@ -8,20 +8,13 @@ import logging
 
 import numpy as np
 import pytest
-from conftest import REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.capture_sets import parse_set_name
 from denali_pipe.cli import main
-from denali_pipe.objects import load_catalogue
 from denali_pipe.rig.capture import synth_sets
 
 N_LOCATIONS = 2
-
-
-@pytest.fixture(scope="module")
-def catalogue():
-    return load_catalogue(REPO / "config" / "objects.tsv")
 
 
 @pytest.fixture(scope="module")

@@ -3,18 +3,11 @@
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import REPO
 
 from denali_pipe.capture_sets import parse_set_name
 from denali_pipe.dataset import build_dataset, location_labels, read_dataset, write_dataset
 from denali_pipe.io.features import read_features, write_features
-from denali_pipe.objects import load_catalogue
 from denali_pipe.preprocess import Features
-
-
-@pytest.fixture(scope="module")
-def catalogue():
-    return load_catalogue(REPO / "config/objects.tsv")
 
 
 def _features(seed, locations=(0, 5, 9), crop=77, bins=51):

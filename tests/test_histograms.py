@@ -2,10 +2,8 @@
 
 import numpy as np
 import pytest
-from conftest import REPO
 
 from denali_pipe import geometry as geo
-from denali_pipe.objects import load_catalogue
 from denali_pipe.rig import histograms as H
 from denali_pipe.rig.measure import measure
 from denali_pipe.rig.scene import mount_scatterer, object_scatterer
@@ -14,11 +12,6 @@ from denali_pipe.rig.scene import mount_scatterer, object_scatterer
 @pytest.fixture(scope="module")
 def phot(demo_config):
     return H.Photometry.from_config(demo_config["rig"]["photometry"])
-
-
-@pytest.fixture(scope="module")
-def catalogue():
-    return load_catalogue(REPO / "config" / "objects.tsv")
 
 
 def plate(centre, normal, side=0.2, spacing=0.01, rho_diffuse=0.0, rho_retro=0.6):

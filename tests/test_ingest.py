@@ -17,7 +17,6 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
@@ -25,7 +24,6 @@ from denali_pipe.ingest import INDEX_COLUMNS, ingest_pickle, ingest_release, ing
 from denali_pipe.io.pickle_stream import UnsafePickleError
 from denali_pipe.io.release import FRAME_DIRS
 from denali_pipe.io.store import open_set
-from denali_pipe.objects import load_catalogue
 from denali_pipe.rig import capture
 
 N_LOCATIONS, REPEATS, SCALE = 3, 3, 0.25
@@ -35,11 +33,6 @@ GOOD = "A_8inch_3x3_lighton"
 
 
 # --- fixtures and helpers -------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def catalogue():
-    return load_catalogue(REPO / "config" / "objects.tsv")
 
 
 @pytest.fixture(scope="module")

@@ -3,26 +3,19 @@
 from __future__ import annotations
 
 import itertools
-from pathlib import Path
 
 import numpy as np
 import pytest
 import shapely
+from conftest import REPO
 from shapely import affinity
 from test_objects import write_sheet
 
 from denali_pipe import meshes as M
 from denali_pipe import objects as O
 
-REPO = Path(__file__).resolve().parents[1]
-SHEET = REPO / "config" / "objects.tsv"
 REAL = (REPO / "../shared/denali-assets/objects").resolve()
 needs_real = pytest.mark.skipif(not REAL.is_dir(), reason=f"no release meshes at {REAL}")
-
-
-@pytest.fixture(scope="module")
-def catalogue():
-    return O.load_catalogue(SHEET)
 
 
 def _centred(geom):

@@ -8,15 +8,7 @@ import pytest
 
 from denali_pipe import objects as O
 
-REPO = Path(__file__).resolve().parents[1]
-SHEET = REPO / "config" / "objects.tsv"
-
 HEADER = "\t".join(O.COLUMNS)
-
-
-@pytest.fixture(scope="module")
-def catalogue():
-    return O.load_catalogue(SHEET)
 
 
 # --- catalogue -----------------------------------------------------------------

@@ -7,19 +7,12 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import REPO
 
-from denali_pipe.objects import load_catalogue
 from denali_pipe.report.render_benchmark import plot_render_benchmark
 from denali_pipe.twin.benchmark import SCENES_PER_OBJECT, benchmark_scenes, pareto_front, run_benchmark
 from denali_pipe.twin.layout import load_calibration, nominal_scene
 
 LOCATIONS = (0, 9, 27, 55, 72, 99)
-
-
-@pytest.fixture(scope="module")
-def catalogue():
-    return load_catalogue(REPO / "config" / "objects.tsv")
 
 
 def test_pareto_front():

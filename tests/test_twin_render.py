@@ -7,12 +7,10 @@ import json
 
 import numpy as np
 import pytest
-from conftest import REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.cli import main
 from denali_pipe.meshes import front_samples, object_mesh
-from denali_pipe.objects import load_catalogue
 from denali_pipe.twin.analytic import AnalyticRenderer
 from denali_pipe.twin.layout import load_calibration, nominal_scene, pixel_centres, twin_scene
 from denali_pipe.twin.render import read_twin, render_twin
@@ -40,11 +38,6 @@ def scene_json(tmp_path_factory):
 @pytest.fixture(scope="module")
 def cal(scene_json):
     return load_calibration(scene_json)
-
-
-@pytest.fixture(scope="module")
-def catalogue():
-    return load_catalogue(REPO / "config" / "objects.tsv")
 
 
 @pytest.fixture(scope="module")

@@ -321,6 +321,11 @@ def histograms_panel(inv: Inventory, sel: Selection, log_y: bool, template: str)
     )
 
 
+# The twin is the same Lambertian plate whatever the object's material: on a
+# non-RR variant it is no prediction of the return.
+TWIN_NOTE = "dashed: the twin (a Lambertian plate) after the scale and blur fitted on the benchmark's objects"
+
+
 def centre_panel(inv: Inventory, sel: Selection, template: str):
     if sel.cs.is_background:
         return figs.message_figure("a background set: no background-subtracted features", template)
@@ -329,14 +334,7 @@ def centre_panel(inv: Inventory, sel: Selection, template: str):
     feats, first_bin = cap.capture_features(inv, sel.cs, sel.location)
     n = sel.cs.n_zones
     if n % 2:
-        zones, main, detail = (
-            [(n // 2, n // 2)],
-            "Centre zone, preprocessed",
-            (
-                # the same Lambertian plate for every material: on a non-RR object it is no prediction of the return
-                "dashed: the twin (a Lambertian plate) after the scale and blur fitted on the benchmark's objects"
-            ),
-        )
+        zones, main, detail = [(n // 2, n // 2)], "Centre zone, preprocessed", TWIN_NOTE
     else:
         # no single centre zone: the four around the centre; the twin models the 3x3 centre zone only
         zones, main, detail = (
