@@ -15,7 +15,7 @@ from denali_pipe.cells import LINEAR, MODELS, SPLITS, TASKS, is_ill_posed
 from denali_pipe.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.experiments.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
 from denali_pipe.geometry import N_LOCATIONS, select_locations
-from denali_pipe.objects import BACKGROUNDS, load_catalogue
+from denali_pipe.objects import BACKGROUNDS, VARIANTS, load_catalogue
 
 min_version("9.0")
 
@@ -193,7 +193,7 @@ def condition_metrics(task, conditions, resolutions, seeds):
     condition, resolution and seed, leaving out those the condition leaves
     ill-posed on the planned samples (tables report them as n/a)."""
     return [
-        RUN_DIR.format(protocol=TRAIN["protocol"], res=res, condition=c, split="random", model="cnn1d", task=task, seed=seed) + "/metrics.json"
+        f"{RUN_DIR.format(protocol=TRAIN['protocol'], res=res, condition=c, split='random', model='cnn1d', task=task, seed=seed)}/metrics.json"
         for res in resolutions for c in conditions for seed in seeds
         if ill_posed(planned_samples(res), task, c) is None
     ]  # fmt: skip
@@ -262,3 +262,36 @@ def fit_inputs(wildcards):
 
 # The fit's settings alone, so that a Fig 9 setting (fig9.smk) reruns no fit.
 FIT_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": {k: FIT[k] for k in ("test_fraction", "bootstrap")}}, sort_keys=True)
+
+
+# --- Figs 10 and 11: the held-out variants (rules/generalisation.smk) ---------
+
+HELD_OUT = [v for v in VARIANTS if v != "base"]
+# Per figure: the variant it scores on and the tasks it scores (the paper's).
+GENERALISATION = {"fig10": ("nonrr", ["location", "shape", "size"]), "fig11": ("italic", ["location", "shape"])}
+# `denali evaluate`'s output: one cell (RUN_DIR's fields) scored on one dataset.
+EVALUATION = f"{RUN_DIR.replace('results/runs/', 'results/evaluations/{dataset}/')}.json"
+
+
+def variant_sets(variant, res):
+    """The capture sets of one variant's objects at a resolution (both sizes
+    and lightings). Drawn when a rule needs them, so a config without them
+    fails only then."""
+    sets = [s.name for s in SETS if s.resolution == res and not s.is_background and CATALOGUE[s.object].variant == variant]
+    if not sets:
+        raise ValueError(f"no {variant} capture sets at {res}: Figs 10/11 need them (config `objects`, `resolutions`)")
+    return sets
+
+
+def generalisation_inputs(figure):
+    """The cells a figure scores (metrics.json), their evaluations on its
+    variant's dataset at the tables' resolution, and that dataset."""
+    variant, tasks = GENERALISATION[figure]
+    res = TRAIN["resolution"]
+    dataset = f"{variant}_{res}"
+    return {
+        "cells": run_files(["cnn1d"], tasks, ["random"]),
+        "evaluations": [d.replace("results/runs/", f"results/evaluations/{dataset}/") + ".json" for d in run_dirs(["cnn1d"], tasks, ["random"])],
+        "variant_x": f"results/datasets/{dataset}.zarr",
+        "variant_table": f"results/datasets/{dataset}.parquet",
+    }

@@ -2,38 +2,6 @@
 # 1D CNN cells, trained on the base objects, scored on the non-retroreflective
 # (Fig 10) and italic (Fig 11) sets, each a dataset of its own.
 
-from denali_pipe.objects import VARIANTS
-
-HELD_OUT = [v for v in VARIANTS if v != "base"]
-# Per figure: the variant it scores on and the tasks it scores (the paper's).
-GENERALISATION = {"fig10": ("nonrr", ["location", "shape", "size"]), "fig11": ("italic", ["location", "shape"])}
-# `denali evaluate`'s output: one cell (RUN_DIR's fields) scored on one dataset.
-EVALUATION = RUN_DIR.replace("results/runs/", "results/evaluations/{dataset}/") + ".json"
-
-
-def variant_sets(variant, res):
-    """The capture sets of one variant's objects at a resolution (both sizes
-    and lightings). Drawn when a rule needs them, so a config without them
-    fails only then."""
-    sets = [s.name for s in SETS if s.resolution == res and not s.is_background and CATALOGUE[s.object].variant == variant]
-    if not sets:
-        raise ValueError(f"no {variant} capture sets at {res}: Figs 10/11 need them (config `objects`, `resolutions`)")
-    return sets
-
-
-def generalisation_inputs(figure):
-    """The cells a figure scores (metrics.json), their evaluations on its
-    variant's dataset at the tables' resolution, and that dataset."""
-    variant, tasks = GENERALISATION[figure]
-    res = TRAIN["resolution"]
-    dataset = f"{variant}_{res}"
-    return {
-        "cells": run_files(["cnn1d"], tasks, ["random"]),
-        "evaluations": [d.replace("results/runs/", f"results/evaluations/{dataset}/") + ".json" for d in run_dirs(["cnn1d"], tasks, ["random"])],
-        "variant_x": f"results/datasets/{dataset}.zarr",
-        "variant_table": f"results/datasets/{dataset}.parquet",
-    }
-
 
 rule variant_dataset:
     input:
@@ -61,7 +29,7 @@ rule evaluate:
     output:
         EVALUATION,
     log:
-        "logs/" + EVALUATION.removeprefix("results/").removesuffix(".json") + ".log",
+        f"logs/{EVALUATION.removeprefix('results/').removesuffix('.json')}.log",
     wildcard_constraints:
         dataset=rf"({'|'.join(HELD_OUT)})_(3x3|8x8)",
     params:

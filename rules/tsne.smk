@@ -23,9 +23,10 @@ rule tsne:
     threads: config["train"]["threads"]
     params:
         runs=lambda w, input: [Path(p).parent for p in input.models],
+        seed=config["seed"],
         title=lambda w: shlex.quote(
             f"t-SNE of the 1D CNN shape classifier's penultimate layer ({TSNE_RESOLUTION[w.fig]}, random split, {TRAIN['protocol']} protocol)"
         ),
     shell:
-        "{DENALI} tsne {params.runs} --dataset {input.x} --table {input.table} --seed {config[seed]} --title {params.title}"
+        "{DENALI} tsne {params.runs} --dataset {input.x} --table {input.table} --seed {params.seed} --title {params.title}"
         " --threads {threads} --out {output.png} > {log} 2>&1"
