@@ -133,7 +133,8 @@ def test_the_histogram_grid_is_a_valid_figure_with_a_subplot_per_zone(n):
 
 
 def test_denali_explore_serves_results_on_localhost_8050_by_default():
-    from denali_pipe.cli import build_parser, cmd_explore
+    from denali_pipe.cli import build_parser
+    from denali_pipe.cli.explore import cmd_explore
 
     args = build_parser().parse_args(["explore"])
     assert (args.func, args.results, args.host, args.port) == (cmd_explore, "results", "127.0.0.1", 8050)

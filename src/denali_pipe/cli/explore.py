@@ -1,0 +1,23 @@
+"""`denali` verbs of the capture explorer."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+log = logging.getLogger("denali")
+
+
+def cmd_explore(args: argparse.Namespace) -> None:
+    from denali_pipe.explore.app import serve
+
+    serve(Path(args.results), args.host, args.port)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    s = sub.add_parser("explore", help="browse the workflow's outputs in a web app: captures, histograms, twins, live predictions")
+    s.add_argument("--results", default="results", help="the results folder to read (nothing is written to it)")
+    s.add_argument("--host", default="127.0.0.1", help="address to serve on")
+    s.add_argument("--port", type=int, default=8050, help="port to serve on")
+    s.set_defaults(func=cmd_explore)

@@ -1,0 +1,57 @@
+"""`denali` verbs of one training cell (rules/train.smk)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+from denali_pipe.cli.common import json_arg
+
+log = logging.getLogger("denali")
+
+
+def cmd_train(args: argparse.Namespace) -> None:
+    import torch
+
+    from denali_pipe.atomic import atomic_dir
+    from denali_pipe.cell_metrics import METRICS_FILE
+    from denali_pipe.cells import LINEAR, Cell
+    from denali_pipe.conditions import condition_view
+    from denali_pipe.dataset import read_dataset
+    from denali_pipe.train import Hyper, run_cell
+
+    torch.set_num_threads(args.threads)
+    cell = Cell(**args.cell)
+    x, samples, _ = read_dataset(Path(args.dataset), Path(args.table))
+    try:
+        x, samples = condition_view(x, samples, cell.task, cell.condition)
+    except ValueError as e:
+        raise ValueError(f"{args.table}: {e}") from None
+    if cell.model == LINEAR:
+        # imported here: scikit-learn costs every neural cell's job ~1.5 CPU-s to import
+        from denali_pipe.classical import run_linear
+
+        result = run_linear(x, samples, cell, args.validation_fraction)
+    else:
+        device = "cuda" if torch.cuda.is_available() else "cpu"
+        result = run_cell(x, samples, cell, Hyper(**args.hyper), args.validation_fraction, device, args.budget_seconds)
+    with atomic_dir(Path(args.outdir)) as tmp:
+        (tmp / METRICS_FILE).write_text(result.metrics.to_json())
+        result.curves.to_csv(tmp / "curves.csv", index=False)
+        torch.save(result.state, tmp / "model.pt")
+    m = result.metrics
+    log.info("wrote %s: test %s, %.1f s training (%.0f samples/s)", args.outdir, m.test, m.train_seconds, m.train_samples_per_second)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    s = sub.add_parser("train", help="train and evaluate one cell (model x task x split x resolution x condition x protocol x seed)")
+    s.add_argument("dataset", help="datasets/<res>.zarr")
+    s.add_argument("--table", required=True, help="datasets/<res>.parquet")
+    s.add_argument("--cell", type=json_arg, required=True, help='JSON {"model", "task", "split", "resolution", "condition", "protocol", "seed"}')
+    s.add_argument("--hyper", type=json_arg, required=True, help='JSON {"lr", "epochs", "batch_size", "norm"} ({} for the linear model)')
+    s.add_argument("--validation-fraction", type=float, required=True, help="validation share of the training split (clean protocol)")
+    s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    s.add_argument("--budget-seconds", type=float, default=None, help="stop a network's training after this much training time")
+    s.add_argument("--outdir", required=True, help="output run folder: metrics.json, curves.csv, model.pt")
+    s.set_defaults(func=cmd_train)
