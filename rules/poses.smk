@@ -21,7 +21,7 @@ rule poses:
 # which visit every gantry location: the location labels and the twins then
 # stay the same when objects are added (as the demo calibrates: 0.06/0.14/0.18 mm
 # mean x/y/z error against the rig's truth on our design, 0.03/0.11/0.17 mm on
-# a release's poses.json; README "Tracking poses").
+# a release's poses.json; docs/performance.md, "Tracking poses").
 rule calibrate:
     input:
         calibration_pose_tables(),

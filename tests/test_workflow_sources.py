@@ -60,7 +60,7 @@ def runs(tmp_path_factory):
     # written in this process, then the two Table 5 runs, whose single-job
     # stages (calibration, dataset, Table 5) would each leave a core idle.
     with ThreadPoolExecutor(2) as pool:
-        # the README's rehearsal: the rig's part of the DAG only (of Table 5's: this
+        # the rehearsal of docs/stages.md "Data sources": the rig's part of the DAG only (of Table 5's: this
         # cut-down config lacks the sets that rule all's Figs 10/11/13/14 need)
         rig = pool.submit(snakemake, wd, TABLE5, "--until", "rig", "--cores", "2", *args["release"], "--config", "source=synthetic", "rig={layout: public}")
         write_streams(sets, cfg, raw, catalogue)
