@@ -1,10 +1,10 @@
 """`denali`: the verbs people call, and one verb per pipeline stage.
 
-The verbs for people (`targets`, `check-release`, `explore`) come first. The stage verbs are what the
-workflow's rules call, one module per file of `rules/` (rule x -> `denali x`
--> module x), each a thin call into the library; the rules pass the
-(already validated) config subset a stage needs as JSON, so that a changed
-setting reruns exactly the jobs that use it.
+The verbs for people (`targets`, `check-release`, `explore`) come first. The
+stage verbs are what the workflow's rules call, one module per file of
+`rules/` (rule x -> `denali x` -> module x), each a thin call into the
+library; the rules pass the (already validated) config subset a stage needs
+as JSON, so that a changed setting reruns exactly the jobs that use it.
 """
 
 from __future__ import annotations
