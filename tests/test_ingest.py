@@ -379,6 +379,14 @@ def test_folder_name_does_not_parse(good_copy, spec):
     expect_failure(bad, spec, re.escape(str(bad)), "capture set folder name does not parse", "<4inch|8inch>")
 
 
+def test_the_capture_scripts_folder_name_is_refused_with_the_rename(good_copy, spec):
+    bad = good_copy.with_name(good_copy.name.replace(FOLDER_SUFFIX, f"_short{FOLDER_SUFFIX}"))
+    good_copy.rename(bad)
+    expect_failure(
+        bad, spec, re.escape(f"{bad}: capture set folder name does not parse: the capture script's `_short` range suffix"), f"rename it to {good_copy.name}"
+    )
+
+
 def test_release_without_metadata_like_the_public_release(good_copy, spec, stores, tmp_path):
     # the public release has no metadata.json and only tracking_rgb frames
     (good_copy / "metadata.json").unlink()

@@ -9,7 +9,7 @@ from release_trees import write_set, write_tree
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, expected_sets
 from denali_pipe.geometry import N_LOCATIONS
 from denali_pipe.io.release import location_span
-from denali_pipe.io.tree import survey_tree
+from denali_pipe.io.tree import misnamed_reason, survey_tree
 
 GRID = {"objects": ["1", "A"], "sizes": ["4inch", "8inch"], "resolutions": ["3x3"], "lightings": ["lighton"]}
 
@@ -149,3 +149,10 @@ def test_capture_streams(tmp_path, sets):
 def test_no_such_raw_dir(tmp_path, sets):
     with pytest.raises(FileNotFoundError, match="raw_dir .*nowhere: no such folder"):
         survey_tree(tmp_path / "nowhere", sets, "release")
+
+
+def test_misnamed_reason_of_one_folder(tmp_path):
+    long = write_set(tmp_path, "", folder="A_4inch_3x3_lighton_long_NLOSdata")
+    assert misnamed_reason(long).startswith("a long-range capture")
+    assert misnamed_reason(write_set(tmp_path, "A_4inch_3x3_lighton")) is None
+    assert misnamed_reason(write_set(tmp_path, "", folder="unrelated")) is None

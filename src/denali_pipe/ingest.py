@@ -50,6 +50,7 @@ from denali_pipe.capture_sets import LIGHTINGS, PICKLE_SUFFIX, CaptureSet, parse
 from denali_pipe.io.pickle_stream import CAMERA_RECORDS, iter_records
 from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE, histogram_files, location_span
 from denali_pipe.io.store import StoreWriter, frame_spec
+from denali_pipe.io.tree import misnamed_reason
 from denali_pipe.objects import ObjectSpec
 
 BACKGROUND_CLASS = "none"
@@ -434,7 +435,8 @@ def _parse_name(source: Path) -> CaptureSet:
     except ValueError as e:
         kind = "capture stream" if source.suffix == ".pkl" else "capture set folder"
         hint = f" (expected <set>{PICKLE_SUFFIX})" if source.suffix == ".pkl" else ""
-        raise ValueError(f"{source}: {kind} name does not parse{hint}: {e}") from None
+        # a set named in another spelling (the capture script's _short suffix, ...) is told which
+        raise ValueError(f"{source}: {kind} name does not parse{hint}: {misnamed_reason(source) or e}") from None
 
 
 def _check_location(k: int, where: str) -> None:

@@ -277,6 +277,15 @@ def _misnamed(entry: Path, source: str, by_casefold: dict[str, str]) -> Misnamed
     return Misnamed(entry.name, f"expected the {kind} name {expected}")
 
 
+def misnamed_reason(path: Path) -> str | None:
+    """Why a set folder or stream at `path` is not read, where its name
+    spells a capture set in a way the pipeline does not read (None: it names none)."""
+    path = Path(path)
+    source = "pickle" if path.name.endswith(_STREAM) else "release"
+    m = None if _well_named(path, source) else _misnamed(path, source, {})
+    return None if m is None else m.reason
+
+
 def _set_folders_below(raw_dir: Path, source: str) -> list[Path]:
     """Folders one or two levels below `raw_dir` that hold capture sets (a
     release unpacked as denali-data/data/...), when `raw_dir` itself holds none."""
