@@ -69,6 +69,15 @@ def test_a_missing_set_and_suffixed_folders_get_clear_messages(tmp_path, sets):
     assert survey.usable() == ["NOOBJECTMOUNT_8inch_3x3_lighton", "NOOBJECT_8inch_3x3_lighton"]
 
 
+def test_an_archive_left_packed_is_named(tmp_path, sets):
+    write_tree(tmp_path, sets, skip={"A_4inch_3x3_lighton"})
+    (tmp_path / "A_4inch_3x3_lighton_NLOSdata.zip").touch()
+    (tmp_path / "denali-code.zip").touch()
+    survey = survey_tree(tmp_path, sets, "release")
+    assert [(m.name, m.reason) for m in survey.misnamed] == [("A_4inch_3x3_lighton_NLOSdata.zip", f"an archive, not a folder: unpack it in {tmp_path}")]
+    assert survey.other == ["denali-code.zip"]
+
+
 def test_a_gap_in_a_sets_locations_is_reported(tmp_path, sets):
     write_tree(tmp_path, sets, skip={"A_4inch_3x3_lighton"})
     write_set(tmp_path, "A_4inch_3x3_lighton", [k for k in range(N_LOCATIONS) if k != 57])

@@ -28,6 +28,8 @@ from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, location_span
 SOURCES = ("release", "pickle")
 SUFFIX = {"release": FOLDER_SUFFIX, "pickle": PICKLE_SUFFIX}
 _STREAM = ".pkl"
+# Archives a download may leave packed beside (or instead of) a set's folder.
+_ARCHIVES = (".zip", ".tar", ".tar.gz", ".tgz")
 _SHORT, _LONG = "_short", "_long"
 # How many names a one-screen message lists before it says how many more.
 _SHOWN = 12
@@ -247,19 +249,19 @@ def _misnamed(entry: Path, source: str, by_casefold: dict[str, str]) -> Misnamed
     """Why an entry that names a capture set in another spelling is not read;
     None for an entry that names none (or the other source's kind: a release
     tree may hold the capture streams beside its folders)."""
+    archive = next((a for a in _ARCHIVES if entry.name.endswith(a)), "")
+    if archive and source == "release" and not entry.is_dir():
+        stem, _ = _split_range(entry.name.removesuffix(archive).removesuffix(FOLDER_SUFFIX))
+        if _set_name(stem, by_casefold) is None:
+            return None
+        return Misnamed(entry.name, f"an archive, not a folder: unpack it in {entry.parent}")
     stream = entry.name.endswith(_STREAM)
     if stream != (source == "pickle") or entry.is_dir() == stream:
         return None
     stem = entry.name.removesuffix(_STREAM)
     has_suffix = stem.endswith(FOLDER_SUFFIX)
-    stem = stem.removesuffix(FOLDER_SUFFIX)
-    rng = next((r for r in (_SHORT, _LONG) if stem.endswith(r)), "")
-    stem = stem.removesuffix(rng)
-    try:
-        parsed = parse_set_name(stem).name
-    except ValueError:
-        parsed = None
-    set_name = by_casefold.get(stem.casefold(), parsed)  # a configured set's spelling first
+    stem, rng = _split_range(stem.removesuffix(FOLDER_SUFFIX))
+    set_name = _set_name(stem, by_casefold)
     kind = "folder" if source == "release" else "stream"
     if set_name is None:
         if has_suffix:
@@ -275,6 +277,22 @@ def _misnamed(entry: Path, source: str, by_casefold: dict[str, str]) -> Misnamed
     if set_name != stem:
         return Misnamed(entry.name, f"names are case-sensitive: expected {expected}")
     return Misnamed(entry.name, f"expected the {kind} name {expected}")
+
+
+def _split_range(stem: str) -> tuple[str, str]:
+    """(`stem` without its range-mode suffix, the suffix or "")."""
+    rng = next((r for r in (_SHORT, _LONG) if stem.endswith(r)), "")
+    return stem.removesuffix(rng), rng
+
+
+def _set_name(stem: str, by_casefold: dict[str, str]) -> str | None:
+    """The capture set `stem` names: a configured set's spelling first (any
+    case), else the stem itself where it parses; None where it names none."""
+    try:
+        parsed = parse_set_name(stem).name
+    except ValueError:
+        parsed = None
+    return by_casefold.get(stem.casefold(), parsed)
 
 
 def misnamed_reason(path: Path) -> str | None:
