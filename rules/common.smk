@@ -10,11 +10,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name
+from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
 from denali_pipe.cells import LINEAR, MODELS, SPLITS, TASKS, is_ill_posed
 from denali_pipe.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.experiments.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
 from denali_pipe.geometry import N_LOCATIONS, select_locations
+from denali_pipe.io.tree import survey_tree
 from denali_pipe.objects import BACKGROUNDS, VARIANTS, load_catalogue
 
 min_version("9.0")
@@ -32,13 +33,15 @@ DENALI = f"{shlex.quote(sys.executable)} -m denali_pipe.cli"
 
 CATALOGUE = load_catalogue(config["objects_sheet"])
 RAW = config["raw_dir"]
-SETS = expected_sets(CATALOGUE, config)
-if config["source"] != "synthetic":
-    # an existing capture tree holds what was captured: use the configured sets it has
-    suffix = FOLDER_SUFFIX if config["source"] == "release" else PICKLE_SUFFIX
-    SETS = [s for s in SETS if Path(f"{RAW}/{s.name}{suffix}").exists()]
-    if not SETS:
-        raise ValueError(f"source {config['source']}: no configured capture set found in {RAW}")
+SETS = select_sets(expected_sets(CATALOGUE, config), config["sets"])
+# An existing capture tree must hold every set used, whole: a missing, misnamed
+# or gapped set stops the run here, never a smaller benchmark in silence.
+TREE = None if config["source"] == "synthetic" else survey_tree(Path(RAW), SETS, config["source"])
+if TREE is not None:
+    if refusal := TREE.refusal(named=config["sets"] != "all"):
+        raise ValueError(refusal)
+    if note := TREE.grid_note():
+        print(f"note: {note}", file=sys.stderr)
 SET_NAMES = [s.name for s in SETS]
 
 
@@ -177,9 +180,14 @@ def run_files(models, tasks, splits, name="metrics.json", res=TRAIN["resolution"
 @functools.cache
 def planned_samples(res):
     """The dataset's sample table at `res` as the config plans it: one row
-    per benchmark set and gantry location (the rig's locations, or the whole
-    grid of a capture tree), the columns conditions.py filters on."""
-    locations = select_locations(config["rig"]["n_locations"]) if config["source"] == "synthetic" else range(N_LOCATIONS)
+    per benchmark set and gantry location (the rig's locations, a release
+    tree's, or the whole grid for capture streams), the columns conditions.py
+    filters on."""
+    if config["source"] == "synthetic":
+        locations = select_locations(config["rig"]["n_locations"])
+    else:
+        # a release tree's sets all hold its locations (checked above); streams are read only by ingest
+        locations = sorted(TREE.locations) if TREE.files else range(N_LOCATIONS)
     names = set(benchmark_sets(res))
     rows = [
         {"class": CATALOGUE[s.object].cls, "type": CATALOGUE[s.object].type, "size": s.size, "light": s.light, "location": k}

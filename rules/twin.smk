@@ -6,8 +6,6 @@ from types import SimpleNamespace
 from denali_pipe.twin.selection import fig18_sets, twin_pairs
 
 TWIN_PAIRS = twin_pairs(CATALOGUE, config)
-# every twin store (for `rule all`)
-TWINS = [f"results/twin/{name}_{size}.zarr" for name, size in TWIN_PAIRS]
 TWIN_MESHES = [f for name, size in TWIN_PAIRS for f in rig_mesh_files(SimpleNamespace(object=name, size=size))]
 # A twin job gets the scene settings and its renderer's own section only, so
 # that e.g. mitransient's spp reruns no analytic twin.

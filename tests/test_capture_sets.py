@@ -17,6 +17,7 @@ from denali_pipe.capture_sets import (
     expected_sets,
     parse_set_name,
     select_objects,
+    select_sets,
 )
 from denali_pipe.objects import BACKGROUNDS
 
@@ -160,3 +161,29 @@ def test_every_object_set_has_its_background(catalogue, demo_config):
     sets = set(expected_sets(catalogue, demo_config))
     for s in sets:
         assert background_of(s) in sets
+
+
+# --- select_sets ---------------------------------------------------------------------
+
+
+def test_select_sets_all_keeps_every_set(catalogue, demo_config):
+    sets = expected_sets(catalogue, demo_config)
+    assert select_sets(sets, "all") == sets
+
+
+def test_select_sets_keeps_the_named_ones_in_name_order(catalogue, demo_config):
+    sets = expected_sets(catalogue, demo_config)
+    named = ["NOOBJECT_8inch_3x3_lighton", "A_4inch_3x3_lighton", "1_8inch_3x3_lighton"]
+    assert [s.name for s in select_sets(sets, named)] == sorted(named)
+
+
+def test_select_sets_refuses_a_set_outside_the_grid(catalogue, demo_config):
+    cfg = copy.deepcopy(demo_config)
+    cfg["resolutions"] = ["3x3"]
+    with pytest.raises(ValueError, match=r"config `sets` names \['A_4inch_8x8_lighton', 'NOOBJECT_8inch_8x8_lighton'\], which the grid .* does not ask for"):
+        select_sets(expected_sets(catalogue, cfg), ["A_4inch_8x8_lighton", "NOOBJECT_8inch_8x8_lighton"])
+
+
+def test_select_sets_needs_the_backgrounds(catalogue, demo_config):
+    with pytest.raises(ValueError, match=r"without their background sets \['NOOBJECT_8inch_3x3_lighton'\]"):
+        select_sets(expected_sets(catalogue, demo_config), ["A_4inch_3x3_lighton"])

@@ -15,7 +15,7 @@ from conftest import REPO
 from snakemake.utils import update_config, validate
 
 from denali_pipe.capture_sets import expected_sets
-from denali_pipe.objects import load_catalogue
+from denali_pipe.objects import BACKGROUNDS, load_catalogue
 
 SCHEMA = str(REPO / "config" / "schema.yaml")
 PRESETS = sorted((REPO / "config" / "presets").glob("*.yaml"))
@@ -55,6 +55,16 @@ def test_preset_validates(preset):
     # and the merge kept every key the preset does not override
     assert set(cfg["rig"]) == set(load(REPO / "config" / "config.yaml")["rig"])
     assert expected_sets(load_catalogue(REPO / cfg["objects_sheet"]), cfg)
+
+
+def test_release_preset_is_the_whole_release_at_the_paper_schedules(catalogue):
+    cfg = merged(load(REPO / "config" / "presets" / "release.yaml"))
+    validate(cfg, SCHEMA)
+    assert (cfg["preset"], cfg["source"], cfg["sets"]) == ("release", "release", "all")
+    assert cfg["train"]["max_epochs"] is None and cfg["train"]["budget_seconds"] is None
+    # every object of the sheet at each of its sizes and both backgrounds, at 2 resolutions x 2 lightings
+    n_sets = sum(len(spec.sizes) for spec in catalogue.values()) + len(BACKGROUNDS)
+    assert len(expected_sets(catalogue, cfg)) == n_sets * 2 * 2
 
 
 @pytest.mark.parametrize("preset", PRESETS, ids=lambda p: p.stem)

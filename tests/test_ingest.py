@@ -22,7 +22,7 @@ from denali_pipe import geometry as geo
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
 from denali_pipe.ingest import INDEX_COLUMNS, ingest_pickle, ingest_release, ingest_set
 from denali_pipe.io.pickle_stream import UnsafePickleError
-from denali_pipe.io.release import FRAME_DIRS
+from denali_pipe.io.release import FRAME_DIRS, location_span
 from denali_pipe.io.store import open_set
 from denali_pipe.rig import capture
 
@@ -321,12 +321,24 @@ def test_histogram_exceeds_int32(good_copy, spec):
 def test_missing_histogram_file(good_copy, spec):
     p = good_copy / "spad_histogram" / "050.npy"
     p.unlink()
-    expect_failure(good_copy, spec, re.escape(str(p)), GOOD, r"missing location file\(s\) for location\(s\) \[50\] listed in metadata.json")
+    expect_failure(
+        good_copy,
+        spec,
+        re.escape(str(p)),
+        GOOD,
+        r"missing location file\(s\) for location\(s\) \[50\]: spad_histogram/ holds \d+ location\(s\) \(.*\), metadata.json lists",
+    )
 
 
 def test_unlisted_histogram_file(good_copy, spec):
     shutil.copy(good_copy / "spad_histogram" / "050.npy", good_copy / "spad_histogram" / "051.npy")
-    expect_failure(good_copy, spec, "051.npy", GOOD, r"location\(s\) \[51\] in spad_histogram/ are not listed")
+    expect_failure(
+        good_copy,
+        spec,
+        "051.npy",
+        GOOD,
+        r"location\(s\) \[51\] in spad_histogram/ are not among the set's locations: spad_histogram/ holds .*, metadata.json lists",
+    )
 
 
 def test_missing_frame_png(good_copy, spec):
@@ -367,6 +379,14 @@ def test_folder_name_does_not_parse(good_copy, spec):
     expect_failure(bad, spec, re.escape(str(bad)), "capture set folder name does not parse", "<4inch|8inch>")
 
 
+def test_the_capture_scripts_folder_name_is_refused_with_the_rename(good_copy, spec):
+    bad = good_copy.with_name(good_copy.name.replace(FOLDER_SUFFIX, f"_short{FOLDER_SUFFIX}"))
+    good_copy.rename(bad)
+    expect_failure(
+        bad, spec, re.escape(f"{bad}: capture set folder name does not parse: the capture script's `_short` range suffix"), f"rename it to {good_copy.name}"
+    )
+
+
 def test_release_without_metadata_like_the_public_release(good_copy, spec, stores, tmp_path):
     # the public release has no metadata.json and only tracking_rgb frames
     (good_copy / "metadata.json").unlink()
@@ -386,7 +406,27 @@ def test_missing_histogram_without_metadata(good_copy, spec):
     (good_copy / "metadata.json").unlink()
     p = good_copy / "tracking_rgb" / "000.png"
     (good_copy / "spad_histogram" / "000.npy").unlink()
-    expect_failure(good_copy, spec, re.escape(str(p)), GOOD, "not listed")
+    # no metadata.json: spad_histogram/ names the locations, and the message says so (not "metadata.json")
+    locations = sorted(int(q.stem) for q in (good_copy / "tracking_rgb").iterdir())
+    held = location_span(locations)
+    kept = location_span(locations[1:])
+    expect_failure(
+        good_copy, spec, re.escape(str(p)), GOOD,
+        re.escape(f"location(s) [0] in tracking_rgb/ are not among the set's locations: tracking_rgb/ holds {len(locations)} location(s) ({held}), "
+                  f"spad_histogram/ (which names the locations: no metadata.json) holds {len(locations) - 1} ({kept})"),
+    )  # fmt: skip
+
+
+def test_missing_frame_without_metadata_names_what_is_there(good_copy, spec):
+    (good_copy / "metadata.json").unlink()
+    locations = sorted(int(q.stem) for q in (good_copy / "spad_histogram").iterdir())
+    p = good_copy / "tracking_rgb" / f"{locations[-1]:03d}.png"
+    p.unlink()
+    expect_failure(
+        good_copy, spec, re.escape(str(p)), GOOD,
+        re.escape(f"missing location file(s) for location(s) [{locations[-1]}]: tracking_rgb/ holds {len(locations) - 1} location(s) "
+                  f"({location_span(locations[:-1])}), spad_histogram/ (which names the locations: no metadata.json) holds {len(locations)}"),
+    )  # fmt: skip
 
 
 def test_metadata_invalid_json(good_copy, spec):

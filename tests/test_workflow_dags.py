@@ -7,12 +7,14 @@ import itertools
 
 import pytest
 import yaml
+from release_trees import write_set, write_tree
 from workflow import copy_workflow, dry_runs, merged_config
 
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
+from denali_pipe.geometry import N_LOCATIONS
 from denali_pipe.objects import load_catalogue
 
-PRESETS = {"tiny": ("config/presets/tiny.yaml",), "demo": (), "paper": ("config/presets/paper.yaml",)}
+PRESETS = {"tiny": ("config/presets/tiny.yaml",), "demo": (), "paper": ("config/presets/paper.yaml",), "release": ("config/presets/release.yaml",)}
 SOURCES = ("synthetic", "release", "pickle")
 PROTOCOLS = ("clean", "paper")
 RENDERERS = ("analytic", "mitransient")
@@ -20,6 +22,11 @@ COMBOS = list(itertools.product(PRESETS, SOURCES, PROTOCOLS, RENDERERS))
 PLACEHOLDERS = "placeholders"
 # a release source whose raw tree holds nothing: a DAG that must not build
 EMPTY = "empty"
+# the tiny preset's release tree without one set and with another under the
+# capture script's name: a DAG that must not build, unless the config names
+# the sets to use (NAMED)
+SHORT, NAMED = "short", "named"
+ABSENT, SUFFIXED = "A_4inch_8x8_lightoff", "circle_8inch_3x3_lighton"
 
 
 def configfiles(wd, preset: str, source: str, protocol: str, renderer: str) -> tuple[str, ...]:
@@ -41,16 +48,25 @@ def preset_sets(scratch, preset: str) -> list[CaptureSet]:
 
 @pytest.fixture(scope="module")
 def scratch(tmp_path_factory):
-    """One scratch copy of the workflow, and a placeholder raw tree: an empty
-    folder and an empty stream for every set of every object (set discovery
-    only asks whether they exist)."""
+    """One scratch copy of the workflow, and a placeholder raw tree: for every
+    set of every object, a folder of empty spad_histogram/NNN.npy files at
+    every location and an empty stream (the DAG reads only their names).
+    Beside it, SHORT: the tiny preset's sets, ABSENT missing and SUFFIXED
+    under its `_short` name."""
     wd = copy_workflow(tmp_path_factory.mktemp("dags"))
     cfg = merged_config(wd)
-    (wd / PLACEHOLDERS).mkdir()
     (wd / EMPTY).mkdir()
     for s in expected_sets(load_catalogue(wd / cfg["objects_sheet"]), {**cfg, "objects": "all"}):
-        (wd / PLACEHOLDERS / f"{s.name}{FOLDER_SUFFIX}").mkdir()
+        hist = wd / PLACEHOLDERS / f"{s.name}{FOLDER_SUFFIX}" / "spad_histogram"
+        hist.mkdir(parents=True)
+        for k in range(N_LOCATIONS):
+            (hist / f"{k:03d}.npy").touch()
         (wd / PLACEHOLDERS / f"{s.name}{PICKLE_SUFFIX}").touch()
+    tiny = preset_sets(wd, "tiny")
+    write_tree(wd / SHORT, tiny, skip={ABSENT, SUFFIXED})
+    write_set(wd / SHORT, SUFFIXED, folder=f"{SUFFIXED}_short{FOLDER_SUFFIX}")
+    usable = [s.name for s in tiny if s.name not in {ABSENT, SUFFIXED}]
+    (wd / f"{NAMED}.yaml").write_text(yaml.safe_dump({"source": "release", "raw_dir": SHORT, "sets": usable}))
     return wd
 
 
@@ -59,6 +75,8 @@ def dags(scratch):
     """{combination (or EMPTY): job counts, or Snakemake's failure}."""
     argsets = {combo: ("--configfile", *configfiles(scratch, *combo)) for combo in COMBOS}
     argsets[EMPTY] = ("--configfile", "config/presets/tiny.yaml", "--config", "source=release", f"raw_dir={EMPTY}")
+    argsets[SHORT] = ("--configfile", "config/presets/tiny.yaml", "--config", "source=release", f"raw_dir={SHORT}")
+    argsets[NAMED] = ("--configfile", "config/presets/tiny.yaml", f"{NAMED}.yaml")
     return dict(zip(argsets, dry_runs(scratch, list(argsets.values()))))
 
 
@@ -75,5 +93,22 @@ def test_rule_all_dag_builds(scratch, dags, combo):
     assert jobs.get("rig", 0) == (len({(s.object, s.size) for s in sets}) if source == "synthetic" else 0)
 
 
-def test_a_dag_that_does_not_build_fails_with_the_reason(dags):
-    assert f"source release: no configured capture set found in {EMPTY}" in dags[EMPTY]
+def test_a_dag_that_does_not_build_fails_with_the_reason(scratch, dags):
+    n = len(preset_sets(scratch, "tiny"))
+    assert f"source release: the capture tree {EMPTY} does not hold the benchmark the config asks for (0 of {n} capture sets found):" in dags[EMPTY]
+
+
+def test_a_tree_smaller_than_configured_is_refused_with_what_is_missing(scratch, dags):
+    n = len(preset_sets(scratch, "tiny"))
+    refusal = dags[SHORT]
+    assert isinstance(refusal, str), refusal
+    assert f"the capture tree {SHORT} does not hold the benchmark the config asks for ({n - 2} of {n} capture sets found):" in refusal
+    assert f"  missing (2): {ABSENT}, {SUFFIXED}" in refusal
+    assert f"  misnamed, not read: {SUFFIXED}_short{FOLDER_SUFFIX}: the capture script's `_short` range suffix" in refusal
+    assert "To proceed: complete the tree; or name the sets to use in config `sets`" in refusal
+
+
+def test_the_sets_a_config_names_run_on_a_smaller_tree(scratch, dags):
+    jobs = dags[NAMED]
+    assert isinstance(jobs, dict), jobs
+    assert jobs["ingest"] == len(preset_sets(scratch, "tiny")) - 2 and jobs.get("rig", 0) == 0

@@ -72,3 +72,20 @@ def expected_sets(catalogue: dict[str, ObjectSpec], config: dict) -> list[Captur
             for spec in select_objects(catalogue, config["objects"]):
                 sets += [CaptureSet(spec.name, s, res, light) for s in spec.sizes if s in config["sizes"]]
     return sorted(sets, key=lambda s: s.name)
+
+
+def select_sets(sets: list[CaptureSet], selection: str | list[str]) -> list[CaptureSet]:
+    """The configured `sets` that the config's `sets` key keeps: `all`, or the
+    named ones. Each named set must be one the grid asks for, and each named
+    object set's background must be named too (preprocessing subtracts it)."""
+    if selection == "all":
+        return list(sets)
+    by_name = {s.name: s for s in sets}
+    unknown = [n for n in selection if n not in by_name]
+    if unknown:
+        raise ValueError(f"config `sets` names {unknown}, which the grid (config `objects`, `sizes`, `resolutions`, `lightings`) does not ask for")
+    chosen = [by_name[n] for n in sorted(set(selection))]
+    lacking = sorted({background_of(s).name for s in chosen if not s.is_background} - set(selection))
+    if lacking:
+        raise ValueError(f"config `sets` names object sets without their background sets {lacking}, which preprocessing subtracts: name them too")
+    return chosen

@@ -48,8 +48,9 @@ import pandas as pd
 from denali_pipe import geometry as geo
 from denali_pipe.capture_sets import LIGHTINGS, PICKLE_SUFFIX, CaptureSet, parse_set_name
 from denali_pipe.io.pickle_stream import CAMERA_RECORDS, iter_records
-from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE, histogram_files
+from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE, histogram_files, location_span
 from denali_pipe.io.store import StoreWriter, frame_spec
+from denali_pipe.io.tree import misnamed_reason
 from denali_pipe.objects import ObjectSpec
 
 BACKGROUND_CLASS = "none"
@@ -110,9 +111,10 @@ def ingest_release(set_dir: Path, out: Path, spec: ObjectSpec | None) -> pd.Data
         metadata = {"locations": sorted(histogram_files(set_dir))}
         md_sources = []
     meta = _Metadata.check(metadata, cs, md_path, require_locations=True)
+    basis = f"{METADATA_FILE} lists" if md_sources else f"{HISTOGRAM_DIR}/ (which names the locations: no {METADATA_FILE}) holds"
 
-    hist_paths = _listed_files(set_dir / HISTOGRAM_DIR, ".npy", meta.locations, cs)
-    frame_paths = {m: _listed_files(set_dir / m, ".png", meta.locations, cs) for m in FRAME_DIRS if (set_dir / m).exists()}
+    hist_paths = _listed_files(set_dir / HISTOGRAM_DIR, ".npy", meta.locations, cs, basis)
+    frame_paths = {m: _listed_files(set_dir / m, ".png", meta.locations, cs, basis) for m in FRAME_DIRS if (set_dir / m).exists()}
 
     def locations() -> Iterator[_Location]:
         for k in meta.locations:
@@ -433,7 +435,8 @@ def _parse_name(source: Path) -> CaptureSet:
     except ValueError as e:
         kind = "capture stream" if source.suffix == ".pkl" else "capture set folder"
         hint = f" (expected <set>{PICKLE_SUFFIX})" if source.suffix == ".pkl" else ""
-        raise ValueError(f"{source}: {kind} name does not parse{hint}: {e}") from None
+        # a set named in another spelling (the capture script's _short suffix, ...) is told which
+        raise ValueError(f"{source}: {kind} name does not parse{hint}: {misnamed_reason(source) or e}") from None
 
 
 def _check_location(k: int, where: str) -> None:
@@ -449,9 +452,11 @@ def _not_array(obj: Any, where: str, field: str):
     raise ValueError(f"{where}: `{field}` is a {type(obj).__name__}, expected a numpy array")
 
 
-def _listed_files(folder: Path, ext: str, locations: list[int], cs: CaptureSet) -> dict[int, Path]:
+def _listed_files(folder: Path, ext: str, locations: list[int], cs: CaptureSet, basis: str) -> dict[int, Path]:
     """{location: folder/NNN<ext>} for every listed location; ValueError for a
-    missing file or a file of a location the metadata does not list."""
+    missing file or a file of a location not listed. `basis` says what lists
+    the locations (metadata.json, or spad_histogram/ where there is none), and
+    each message says what `folder` holds beside it."""
     if not folder.is_dir():
         raise ValueError(f"{folder}: capture set {cs.name}: expected a folder of NNN{ext} files, found {'a file' if folder.exists() else 'nothing'}")
     found = {}
@@ -460,13 +465,14 @@ def _listed_files(folder: Path, ext: str, locations: list[int], cs: CaptureSet) 
         if stem is None or len(stem) != 3 or not stem.isdigit():
             raise ValueError(f"{p}: capture set {cs.name}: unexpected file in {folder.name}/ (expected NNN{ext})")
         found[int(stem)] = p
+    holds = f"{folder.name}/ holds {len(found)} location(s) ({location_span(found)}), {basis} {len(locations)} ({location_span(locations)})"
     missing = [k for k in locations if k not in found]
     if missing:
         names = ", ".join(f"{folder / f'{k:03d}{ext}'}" for k in missing[:5])
-        raise ValueError(f"{names}: capture set {cs.name}: missing location file(s) for location(s) {missing} listed in metadata.json")
+        raise ValueError(f"{names}: capture set {cs.name}: missing location file(s) for location(s) {missing}: {holds}")
     extra = sorted(set(found) - set(locations))
     if extra:
-        raise ValueError(f"{found[extra[0]]}: capture set {cs.name}: location(s) {extra} in {folder.name}/ are not listed in metadata.json")
+        raise ValueError(f"{found[extra[0]]}: capture set {cs.name}: location(s) {extra} in {folder.name}/ are not among the set's locations: {holds}")
     return {k: found[k] for k in locations}
 
 

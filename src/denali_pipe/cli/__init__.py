@@ -1,10 +1,10 @@
 """`denali`: the verbs people call, and one verb per pipeline stage.
 
-The verbs for people (`explore`, ...) come first. The stage verbs are what the
-workflow's rules call, one module per file of `rules/` (rule x -> `denali x`
--> module x), each a thin call into the library; the rules pass the
-(already validated) config subset a stage needs as JSON, so that a changed
-setting reruns exactly the jobs that use it.
+The verbs for people (`targets`, `check-release`, `explore`) come first. The
+stage verbs are what the workflow's rules call, one module per file of
+`rules/` (rule x -> `denali x` -> module x), each a thin call into the
+library; the rules pass the (already validated) config subset a stage needs
+as JSON, so that a changed setting reruns exactly the jobs that use it.
 """
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ from __future__ import annotations
 import argparse
 import logging
 
-from denali_pipe.cli import explore, fig9, fit, generalisation, ingest, jitter, poses, preprocess, report, rig, train, tsne, twin
+from denali_pipe.cli import explore, fig9, fit, generalisation, ingest, jitter, poses, preprocess, release, report, rig, targets, train, tsne, twin
 
 log = logging.getLogger("denali")
 
 # Verbs for people, then the stage verbs in the order the DAG runs them.
-USER_MODULES = (explore,)
+USER_MODULES = (targets, release, explore)
 STAGE_MODULES = (rig, ingest, poses, preprocess, train, report, twin, fit, fig9, generalisation, tsne, jitter)
 
 

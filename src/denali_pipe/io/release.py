@@ -26,3 +26,17 @@ def histogram_files(set_dir: Path) -> dict[int, Path]:
             raise ValueError(f"{p}: unexpected file in {HISTOGRAM_DIR}/ (expected NNN.npy)")
         files[int(m[1])] = p
     return files
+
+
+def location_span(locations) -> str:
+    """Gantry locations as their file stems in runs, e.g. [0, 1, 2, 4] -> '000-002, 004'
+    (a message naming 99 locations stays one short line)."""
+    locs = sorted(int(k) for k in locations)
+    if not locs:
+        return "none"
+    runs, start = [], locs[0]
+    for prev, k in zip(locs, [*locs[1:], None]):
+        if k is None or k != prev + 1:  # a run ends at prev
+            runs.append(f"{start:03d}" if start == prev else f"{start:03d}-{prev:03d}")
+            start = k
+    return ", ".join(runs)
