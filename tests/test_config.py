@@ -18,6 +18,7 @@ from denali_pipe.capture_sets import expected_sets
 from denali_pipe.objects import load_catalogue
 
 SCHEMA = str(REPO / "config" / "schema.yaml")
+HYPER = {"lr": 1e-3, "epochs": 1, "batch_size": 8, "norm": "raw"}
 PRESETS = sorted((REPO / "config" / "presets").glob("*.yaml"))
 
 
@@ -169,8 +170,13 @@ def test_dry_run_bad_config_argument(workflow_copy):
     [
         ({"rig": {"n_locations": 0}}, "n_locations"),
         ({"objects": ["A", "zeppelin"]}, "zeppelin"),
+        ({"train": {"benchmark_model": "resnet"}}, "train.benchmark_model: 'resnet' is not a registered model"),
+        (
+            {"train": {"models": {"tof": {"factory": "examples.no_such_model:tof", **{t: HYPER for t in ("location", "shape", "size")}}}}},
+            "train.models.tof.factory",
+        ),
     ],
-    ids=["n_locations", "unknown-object"],
+    ids=["n_locations", "unknown-object", "unknown-benchmark-model", "unresolved-factory"],
 )
 def test_dry_run_bad_preset(workflow_copy, tmp_path, preset, key):
     # (each run costs ~2 s of Snakemake start-up; the other bad values are covered in-process above)

@@ -259,7 +259,7 @@ def test_jitter_sweep(tiny_run):
 
 def test_changing_one_models_hyperparameters_reruns_only_its_cells_and_tables(tiny_run, tmp_path):
     cfg = tmp_path / "lr.yaml"
-    cfg.write_text("train:\n  hyper:\n    mlp:\n      location: {lr: 0.002}\n")
+    cfg.write_text("train:\n  models:\n    mlp:\n      location: {lr: 0.002}\n")
     out = snakemake(tiny_run, "-n", "--configfile", "config/presets/tiny.yaml", str(cfg)).stdout
     jobs = job_counts(out)
     assert jobs == {"train": 1, "table2": 1, "table10": 1, "speed_vs_accuracy": 1, "all": 1, "total": 5}

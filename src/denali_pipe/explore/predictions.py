@@ -16,8 +16,9 @@ import pandas as pd
 
 from denali_pipe.cell_metrics import METRICS_FILE, CellMetrics
 from denali_pipe.dataset import read_dataset
-from denali_pipe.evaluate import MODEL_FILE, TrainedCell, load_cell, predict, score
+from denali_pipe.evaluate import TrainedCell, load_cell, predict, score
 from denali_pipe.explore.outputs import CellChoice, Inventory, dataset_paths
+from denali_pipe.saved_cell import MODEL_FILE
 from denali_pipe.train import partition, targets
 
 # What the per-location heat map shows for each task: the `evaluate.score`
