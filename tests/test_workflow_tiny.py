@@ -266,6 +266,29 @@ def test_changing_one_models_hyperparameters_reruns_only_its_cells_and_tables(ti
     assert "mlp_location" in out
 
 
+def test_the_example_model_runs_through_table5_and_joins_the_benchmark(tiny_run, tmp_path):
+    """examples/tof.yaml registers a model outside the package and makes it
+    the benchmark model: Table 5 trains its cells from the tiny run's
+    datasets; Tables 2 and 10 add its random-split cells beside the
+    paper's four; the explorer offers it."""
+    from denali_pipe.explore.outputs import scan
+
+    wd = tmp_path / "wd"
+    shutil.copytree(tiny_run, wd, symlinks=True)
+    example = (*TINY, "examples/tof.yaml")
+    jobs = job_counts(snakemake(wd, "-n", "results/table5.csv", *example).stdout)
+    assert jobs == {"train": 13, "table5": 1, "total": 14}  # 5 splits x 3 tasks less the 2 ill-posed; nothing upstream
+    snakemake(wd, "--cores", "2", "results/table5.csv", *example)
+    t5 = pd.read_csv(wd / "results/table5.csv", keep_default_na=False).set_index("split")
+    assert set(t5["model"]) == {"tof"} and list(t5.index) == ["random", "repeats_grouped", "location_held_out", "shape_held_out", "size_held_out"]
+    assert 0 < float(t5.loc["random", "loc_rmse"]) < 2.0 and 0 <= float(t5.loc["random", "shape_top1"]) <= 1
+    m = json.loads((wd / "results/runs/clean/3x3/all/random/tof_shape/seed42/metrics.json").read_text())
+    assert m["params"] < 20_000 and m["flops"] > 0
+    # its random-split cells are Table 5's: Tables 2 and 10 only add them to the paper's four
+    assert job_counts(snakemake(wd, "-n", "results/table2.csv", "results/table10.csv", *example).stdout) == {"table2": 1, "table10": 1, "total": 2}
+    assert "tof" in {c.model for c in scan(wd / "results").choices("3x3")}
+
+
 def test_training_cells_request_the_configured_gpus(tiny_run, tmp_path):
     cell = "results/runs/clean/3x3/all/random/cnn1d_location/seed42/metrics.json"
     cfg = tmp_path / "gpu.yaml"
