@@ -12,12 +12,12 @@ from __future__ import annotations
 import argparse
 import logging
 
-from denali_pipe.cli import explore, fig9, fit, generalisation, ingest, jitter, poses, preprocess, report, rig, train, tsne, twin
+from denali_pipe.cli import explore, export, fig9, fit, generalisation, ingest, jitter, poses, predict, preprocess, report, rig, train, tsne, twin
 
 log = logging.getLogger("denali")
 
 # Verbs for people, then the stage verbs in the order the DAG runs them.
-USER_MODULES = (explore,)
+USER_MODULES = (explore, predict, export)
 STAGE_MODULES = (rig, ingest, poses, preprocess, train, report, twin, fit, fig9, generalisation, tsne, jitter)
 
 
