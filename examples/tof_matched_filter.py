@@ -58,7 +58,7 @@ class MatchedFilterNet(nn.Module):
     The features have different units (a fraction of the histogram, logs of
     counts), hence the normalisation; it pools the zones as well as the batch,
     like the paper's models pool time, so a training batch of one sample is
-    fine. No dropout: on the location head, whose outputs sit ~1 m from zero,
+    fine (of one sample and one zone, see `forward`). No dropout: on the location head, whose outputs sit ~1 m from zero,
     dropping hidden units moves the output by more than the spread of the
     labels (a few cm on the test data), and the model did not beat the mean."""
 
@@ -91,7 +91,16 @@ class MatchedFilterNet(nn.Module):
         return f.reshape(b, n * n, -1).transpose(1, 2)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.head(self.norm(self.features(x)))
+        f = self.features(x)
+        if self.training and f.shape[0] * f.shape[-1] == 1:
+            # One sample of one zone (the jitter sweep's centre zone, in an
+            # epoch's last batch of one) is one value per channel, which
+            # cannot be batch-normalised: use the running statistics.
+            self.norm.eval()
+            f = self.norm(f)
+            self.norm.train()
+            return self.head(f)
+        return self.head(self.norm(f))
 
 
 def tof_matched_filter(task: str, n_outputs: int, input_shape: tuple[int, int, int]) -> nn.Module:

@@ -23,6 +23,9 @@ def test_the_example_config_registers_the_matched_filter_model(in_workflow_folde
     net = build("tof", models["tof"]["factory"], "shape", (3, 3, 40), n_classes=5)
     assert net(torch.randn(2, 3, 3, 40)).shape == (2, 5)
     assert not [n for n, _ in net.named_parameters() if "bank" in n]  # the filters are fixed
+    # the jitter sweep's centre zone, in an epoch's last batch of one sample, trains
+    centre = build("tof", models["tof"]["factory"], "size", (1, 1, 40), n_classes=2).train()
+    centre(torch.randn(1, 1, 1, 40)).sum().backward()
 
 
 @pytest.mark.parametrize(("task", "beats"), [("location", 0.75), ("size", 1.5), ("shape", 2.0)])
