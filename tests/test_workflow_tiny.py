@@ -9,6 +9,7 @@ import browser
 import numpy as np
 import pandas as pd
 import pytest
+import torch
 from workflow import copy_workflow, job_counts, snakemake
 
 from denali_pipe.capture_sets import expected_sets
@@ -287,6 +288,45 @@ def test_the_example_model_runs_through_table5_and_joins_the_benchmark(tiny_run,
     # its random-split cells are Table 5's: Tables 2 and 10 only add them to the paper's four
     assert job_counts(snakemake(wd, "-n", "results/table2.csv", "results/table10.csv", *example).stdout) == {"table2": 1, "table10": 1, "total": 2}
     assert "tof" in {c.model for c in scan(wd / "results").choices("3x3")}
+
+
+def test_predict_and_export_a_tiny_capture_as_training_saw_it(tiny_run, tmp_path, capsys):
+    """`denali predict` on a release file of the tiny run answers what the
+    cells answer for the dataset's rows of that capture (the same
+    preprocessing, averaged over the repeats); `denali export` of the shape
+    cell gives its logits."""
+    from denali_pipe.cli import main
+    from denali_pipe.dataset import read_dataset
+    from denali_pipe.evaluate import load_cell, predict
+    from denali_pipe.export import load_export
+    from denali_pipe.predict import softmax
+
+    results = tiny_run / "results"
+    x, samples, _ = read_dataset(results / "datasets/3x3.zarr", results / "datasets/3x3.parquet")
+    set_name = "circle_8inch_3x3_lighton"
+    location = int(samples[samples.set == set_name].location.iloc[len(samples[samples.set == set_name]) // 2])
+    rows = samples.index[(samples.set == set_name) & (samples.location == location)]
+    runs = [results / f"runs/clean/3x3/all/random/cnn1d_{task}/seed42" for task in ("location", "shape", "size")]
+    capture = tiny_run / f"data/raw/{set_name}_NLOSdata/spad_histogram/{location:03d}.npy"
+    background = tiny_run / f"data/raw/NOOBJECT_8inch_3x3_lighton_NLOSdata/spad_histogram/{location:03d}.npy"
+    args = [*map(str, runs), str(capture), "--background", str(background), "--crop", str(results / "features/crop_3x3.json")]
+    assert main(["predict", *args]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["gantry_location"] == location and out["repeats"] == list(range(len(rows)))
+    xy = predict(load_cell(runs[0]), x[rows]).mean(axis=0)
+    assert (out["location"]["x_m"], out["location"]["y_m"]) == pytest.approx(tuple(xy), abs=1e-5)
+    shape = load_cell(runs[1])
+    p = softmax(predict(shape, x[rows])).mean(axis=0)
+    assert [(c["class"], c["probability"]) for c in out["shape"]["top5"]] == [
+        (shape.classes[i], pytest.approx(float(p[i]), abs=1e-5)) for i in np.argsort(-p)[:5]
+    ]
+    assert out["size"]["class"] in ("4inch", "8inch")
+    assert main(["export", str(runs[1]), str(tmp_path / "shape.pt")]) == 0
+    module, meta = load_export(tmp_path / "shape.pt")
+    with torch.no_grad():
+        logits = module(torch.from_numpy(x[rows])).numpy()
+    np.testing.assert_allclose(logits, predict(shape, x[rows]), rtol=1e-4, atol=1e-4)
+    assert meta["classes"] == shape.classes
 
 
 def test_training_cells_request_the_configured_gpus(tiny_run, tmp_path):
