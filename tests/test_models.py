@@ -66,7 +66,17 @@ def test_forward_flops_of_the_mlp_are_its_matrix_products():
     widths = [3 * 3 * 128, 512, 256, 128, 2]
     model = build_model("mlp", "location", n=3, bins=128, n_classes=30).train()
     assert forward_flops(model, (3, 3, 128)) == sum(2 * a * b for a, b in zip(widths, widths[1:]))
-    assert model.training  # left in the mode it was in
+
+
+def test_forward_flops_see_the_transformers_encoder_and_leave_the_model_alone():
+    """Every token passes every encoder weight matrix once: at least 2 FLOPs per weight and token."""
+    model = transformer("location", 2, (3, 3, 57)).eval()
+    weights = sum(p.numel() for name, p in model.encoder.named_parameters() if p.dim() == 2)
+    assert forward_flops(model, (3, 3, 57)) > 2 * weights * 58  # 57 time-bin tokens and the CLS token
+    net = cnn1d("size", 2, (3, 3, 57)).eval()
+    before = {k: v.clone() for k, v in net.state_dict().items()}
+    forward_flops(net, (3, 3, 57))
+    assert not net.training and all(torch.equal(before[k], v) for k, v in net.state_dict().items())
 
 
 # 8x8 zones with a cropped time axis, and the paper's full 3x3x128 input.

@@ -17,6 +17,7 @@ from (n, bins) at construction, so parameter counts are known before any forward
 
 from __future__ import annotations
 
+import copy
 import math
 
 import torch
@@ -226,18 +227,20 @@ PAPER_MODELS = {"mlp": mlp, "cnn1d": cnn1d, "cnn3d": cnn3d, "transformer": trans
 
 
 def forward_flops(model: nn.Module, input_shape: tuple[int, int, int]) -> int:
-    """Floating-point operations of one sample's forward pass in eval mode, as
-    torch's FlopCounterMode counts them: 2 per multiply-add of the matrix
-    products, convolutions and attention; elementwise operations, norms and
-    activations are not counted (they are a few % for these models)."""
+    """Floating-point operations of one sample's forward pass, as torch's
+    FlopCounterMode counts them: 2 per multiply-add of the matrix products,
+    convolutions and attention; elementwise operations, norms and activations
+    are not counted (they are a few % for these models).
+
+    Counted on a copy in training mode: in eval mode PyTorch runs the
+    Transformer's encoder layers as one fused kernel that the counter does not
+    see, and the copy keeps the model's BatchNorm statistics untouched."""
     from torch.utils.flop_counter import FlopCounterMode
 
-    was_training = model.training
-    model.eval()
-    param = next(model.parameters(), None)
+    probe = copy.deepcopy(model).train()
+    param = next(probe.parameters(), None)
     x = torch.zeros(1, *input_shape, device=None if param is None else param.device)
     counter = FlopCounterMode(display=False)
     with counter, torch.no_grad():
-        model(x)
-    model.train(was_training)
+        probe(x)
     return int(counter.get_total_flops())
