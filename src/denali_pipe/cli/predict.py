@@ -32,6 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the matching NOOBJECT background (same resolution and lighting) at the same gantry location: its NNN.npy, store or stream",
     )
     s.add_argument("--crop", required=True, help="crop_<res>.json from crop-window (results/features/crop_<res>.json of the run)")
-    s.add_argument("--location", type=int, default=None, help="the gantry location (default: NNN of the file name; needed for a store or stream of several locations)")
+    s.add_argument(
+        "--location", type=int, default=None, help="the gantry location (default: NNN of the file name; needed for a store or stream of several locations)"
+    )
     s.add_argument("--repeat", type=int, default=None, help="use this repeat only (default: average over every repeat of the capture)")
     s.set_defaults(func=cmd_predict)
