@@ -165,6 +165,15 @@ def test_dry_run_bad_config_argument(workflow_copy):
     assert "n_locations" in out, out
 
 
+def test_dry_run_leaves_out_a_model_set_to_null(workflow_copy, tmp_path):
+    path = tmp_path / "no_mlp.yaml"
+    path.write_text(yaml.safe_dump({"train": {"models": {"mlp": None}}}))
+    r = dry_run(workflow_copy, "results/table2.csv", "--configfile", str(path))
+    out = r.stdout + r.stderr
+    assert r.returncode == 0, out
+    assert "cnn1d_location" in out and "mlp_" not in out
+
+
 @pytest.mark.parametrize(
     "preset,key",
     [
