@@ -26,8 +26,8 @@ test: setup lint
 # The style holds without anyone policing it: ruff (lint, format) on the
 # Python, snakefmt on the workflow; settings in pyproject.toml.
 lint: setup
-	ruff check src tests scripts
-	ruff format --check src tests scripts
+	ruff check src tests scripts examples
+	ruff format --check src tests scripts examples
 	snakefmt --check Snakefile rules
 
 # The capture explorer over results/ (what `make run` built, or any run's):

@@ -11,12 +11,13 @@ from pathlib import Path
 import pandas as pd
 
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
-from denali_pipe.cells import LINEAR, MODELS, SPLITS, TASKS, is_ill_posed
+from denali_pipe.cells import LINEAR, SPLITS, TASKS, is_ill_posed
 from denali_pipe.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.experiments.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
 from denali_pipe.geometry import N_LOCATIONS, select_locations
 from denali_pipe.io.tree import survey_tree
 from denali_pipe.objects import BACKGROUNDS, VARIANTS, load_catalogue
+from denali_pipe.registry import check_models
 
 min_version("9.0")
 
@@ -25,6 +26,12 @@ configfile: "config/config.yaml"
 
 
 validate(config, "../config/schema.yaml")
+
+# The networks to benchmark (train.models, entries set to null left out) and
+# the model of the one-model experiments (train.benchmark_model).
+MODELS = check_models(config["train"]["models"], config["train"]["benchmark_model"])
+BENCHMARK_MODEL = config["train"]["benchmark_model"]
+BENCHMARK_LABEL = MODELS[BENCHMARK_MODEL].get("label", BENCHMARK_MODEL)
 
 # The rules run `denali <verb>` through the interpreter that runs this
 # workflow, so jobs find the project whether or not its venv is activated,
@@ -197,11 +204,11 @@ def planned_samples(res):
 
 
 def condition_metrics(task, conditions, resolutions, seeds):
-    """metrics.json of the random-split 1D CNN cells of `task` under each
+    """metrics.json of the random-split benchmark-model cells of `task` under each
     condition, resolution and seed, leaving out those the condition leaves
     ill-posed on the planned samples (tables report them as n/a)."""
     return [
-        f"{RUN_DIR.format(protocol=TRAIN['protocol'], res=res, condition=c, split='random', model='cnn1d', task=task, seed=seed)}/metrics.json"
+        f"{RUN_DIR.format(protocol=TRAIN['protocol'], res=res, condition=c, split='random', model=BENCHMARK_MODEL, task=task, seed=seed)}/metrics.json"
         for res in resolutions for c in conditions for seed in seeds
         if ill_posed(planned_samples(res), task, c) is None
     ]  # fmt: skip
@@ -235,10 +242,16 @@ def cell_arg(wildcards):
 def hyper_arg(wildcards):
     if wildcards.model == LINEAR:
         return shlex.quote("{}")
-    hp = dict(TRAIN["hyper"][wildcards.model][wildcards.task])
+    hp = dict(MODELS[wildcards.model][wildcards.task])
     if TRAIN["max_epochs"] is not None:
         hp["epochs"] = min(hp["epochs"], TRAIN["max_epochs"])
     return shlex.quote(json.dumps(hp, sort_keys=True))
+
+
+def factory_arg(wildcards):
+    if wildcards.model == LINEAR:
+        return ""
+    return f"--factory {shlex.quote(MODELS[wildcards.model]['factory'])}"
 
 
 def budget_arg(wildcards):
@@ -298,8 +311,8 @@ def generalisation_inputs(figure):
     res = TRAIN["resolution"]
     dataset = f"{variant}_{res}"
     return {
-        "cells": run_files(["cnn1d"], tasks, ["random"]),
-        "evaluations": [d.replace("results/runs/", f"results/evaluations/{dataset}/") + ".json" for d in run_dirs(["cnn1d"], tasks, ["random"])],
+        "cells": run_files([BENCHMARK_MODEL], tasks, ["random"]),
+        "evaluations": [d.replace("results/runs/", f"results/evaluations/{dataset}/") + ".json" for d in run_dirs([BENCHMARK_MODEL], tasks, ["random"])],
         "variant_x": f"results/datasets/{dataset}.zarr",
         "variant_table": f"results/datasets/{dataset}.parquet",
     }

@@ -1,5 +1,5 @@
-# Figs 10 and 11 (experiments/generalisation.py): the benchmark's random-split
-# 1D CNN cells, trained on the base objects, scored on the non-retroreflective
+# Figs 10 and 11 (experiments/generalisation.py): the benchmark model's
+# (train.benchmark_model) random-split cells, trained on the base objects, scored on the non-retroreflective
 # (Fig 10) and italic (Fig 11) sets, each a dataset of its own.
 
 

@@ -4,7 +4,7 @@ CURVE_TASK = {"fig16": "location", "fig17": "shape"}
 
 rule table5:
     input:
-        run_files(["cnn1d"], TASKS, SPLITS),
+        run_files([BENCHMARK_MODEL], TASKS, SPLITS),
     output:
         report("results/table5.csv", caption="../report/table5.rst", category="3. Training"),
     log:
@@ -15,7 +15,7 @@ rule table5:
 
 rule table2:
     input:
-        run_files(MODELS, TASKS, ["random"]),
+        run_files(list(MODELS), TASKS, ["random"]),
     output:
         report("results/table2.csv", caption="../report/table2.rst", category="3. Training"),
     log:
@@ -26,7 +26,7 @@ rule table2:
 
 rule table10:
     input:
-        run_files(MODELS, TASKS, ["random"]),
+        run_files(list(MODELS), TASKS, ["random"]),
     output:
         report("results/table10.csv", caption="../report/table10.rst", category="3. Training"),
     log:
@@ -49,7 +49,7 @@ rule speed_vs_accuracy:
 
 rule training_curves:
     input:
-        lambda w: run_files(["cnn1d"], [CURVE_TASK[w.fig]], ["random"], "curves.csv"),
+        lambda w: run_files([BENCHMARK_MODEL], [CURVE_TASK[w.fig]], ["random"], "curves.csv"),
     output:
         png=report("results/{fig}.png", caption="../report/training_curves.rst", category="3. Training"),
         csv="results/{fig}.csv",
@@ -58,7 +58,9 @@ rule training_curves:
     wildcard_constraints:
         fig="fig16|fig17",
     params:
-        title=lambda w: shlex.quote(f"1D CNN {CURVE_TASK[w.fig]} training curves ({TRAIN['resolution']}, random split, {TRAIN['protocol']} protocol)"),
+        title=lambda w: shlex.quote(
+            f"{BENCHMARK_LABEL} {CURVE_TASK[w.fig]} training curves ({TRAIN['resolution']}, random split, {TRAIN['protocol']} protocol)"
+        ),
     shell:
         "{DENALI} report {wildcards.fig} {input} --title {params.title} --out {output.png} > {log} 2>&1"
 

@@ -21,9 +21,10 @@ rule train:
     params:
         cell=cell_arg,
         hyper=hyper_arg,
+        factory=factory_arg,
         outdir=lambda w, output: Path(output.metrics).parent,
         validation=config["train"]["validation_fraction"],
         budget=budget_arg,
     shell:
-        "{DENALI} train {input.x} --table {input.table} --cell {params.cell} --hyper {params.hyper}"
+        "{DENALI} train {input.x} --table {input.table} --cell {params.cell} --hyper {params.hyper} {params.factory}"
         " --validation-fraction {params.validation} {params.budget} --threads {threads} --outdir {params.outdir} > {log} 2>&1"

@@ -1,5 +1,5 @@
-# Figs 13 and 14 (experiments/tsne.py): t-SNE of the random-split 1D CNN
-# shape cells' penultimate-layer embeddings at 3x3 and 8x8, with the classes'
+# Figs 13 and 14 (experiments/tsne.py): t-SNE of the random-split benchmark
+# model's (train.benchmark_model) shape cells' penultimate-layer embeddings at 3x3 and 8x8, with the classes'
 # separability in the embedding space.
 
 TSNE_RESOLUTION = {"fig13": "3x3", "fig14": "8x8"}
@@ -7,8 +7,8 @@ TSNE_RESOLUTION = {"fig13": "3x3", "fig14": "8x8"}
 
 rule tsne:
     input:
-        models=lambda w: run_files(["cnn1d"], ["shape"], ["random"], "model.pt", TSNE_RESOLUTION[w.fig]),
-        metrics=lambda w: run_files(["cnn1d"], ["shape"], ["random"], "metrics.json", TSNE_RESOLUTION[w.fig]),
+        models=lambda w: run_files([BENCHMARK_MODEL], ["shape"], ["random"], "model.pt", TSNE_RESOLUTION[w.fig]),
+        metrics=lambda w: run_files([BENCHMARK_MODEL], ["shape"], ["random"], "metrics.json", TSNE_RESOLUTION[w.fig]),
         x=lambda w: f"results/datasets/{TSNE_RESOLUTION[w.fig]}.zarr",
         table=lambda w: f"results/datasets/{TSNE_RESOLUTION[w.fig]}.parquet",
     output:
@@ -25,7 +25,7 @@ rule tsne:
         runs=lambda w, input: [Path(p).parent for p in input.models],
         seed=config["seed"],
         title=lambda w: shlex.quote(
-            f"t-SNE of the 1D CNN shape classifier's penultimate layer ({TSNE_RESOLUTION[w.fig]}, random split, {TRAIN['protocol']} protocol)"
+            f"t-SNE of the {BENCHMARK_LABEL} shape classifier's penultimate layer ({TSNE_RESOLUTION[w.fig]}, random split, {TRAIN['protocol']} protocol)"
         ),
     shell:
         "{DENALI} tsne {params.runs} --dataset {input.x} --table {input.table} --seed {params.seed} --title {params.title}"

@@ -33,16 +33,22 @@ import time
 import torch
 from torch import nn
 
-from denali_pipe.models import build_model, n_params
+from denali_pipe.models import PAPER_MODELS, n_params
+from denali_pipe.registry import n_outputs
 
 N = 3  # zones per side
 BINS = (128, 56)  # full histograms; cropped after the first bounce
 BATCHES = (64, 256)
 ROWS = (("mlp", "location"), ("cnn1d", "location"), ("cnn3d", "location"), ("cnn3d", "shape"),
         ("transformer", "location"))  # fmt: skip
+N_CLASSES = 30  # the benchmark's shape classes
 STEP_BUDGET_S = 1.5  # timed seconds per cell
 SLOW_STEP_S = 2.0  # a warm-up step longer than this is the measurement itself
 MAX_STEP_S = 20.0  # skip cells whose single step would take longer
+
+
+def build(name: str, task: str, bins: int) -> nn.Module:
+    return PAPER_MODELS[name](task, n_outputs(task, N_CLASSES), (N, N, bins))
 
 
 def step_fn(model: nn.Module, task: str, x: torch.Tensor, y: torch.Tensor, batch: int):
@@ -64,10 +70,10 @@ def throughput(name: str, task: str, bins: int, batch: int, est_step_s: float | 
     if est_step_s is not None and est_step_s > MAX_STEP_S:
         return batch / est_step_s, "skipped"
     torch.manual_seed(0)
-    model = build_model(name, task, N, bins).train()
+    model = build(name, task, bins).train()
     n_samples = 4 * batch
     x = torch.randn(n_samples, N, N, bins)
-    y = torch.rand(n_samples, 2) if task == "location" else torch.randint(30, (n_samples,))
+    y = torch.rand(n_samples, 2) if task == "location" else torch.randint(n_outputs(task, N_CLASSES), (n_samples,))
     step = step_fn(model, task, x, y, batch)
     t0 = time.perf_counter()
     step()  # warm-up: allocations, oneDNN primitives for these shapes
@@ -99,7 +105,7 @@ def main() -> None:
                 rate, note = throughput(name, task, bins, batch, est)
                 est = BATCHES[-1] / rate  # step time at the larger batch, if time grows linearly with it
                 cells.append(f"[{rate:.1f}] {note}" if note == "skipped" else f"{rate:.1f} ({note})")
-        params = n_params(build_model(name, task, N, BINS[0]))
+        params = n_params(build(name, task, BINS[0]))
         print(f"{name:<12}{task:<10}{params:>11,}" + "".join(f"{c:>24}" for c in cells), flush=True)
     print(f"total {time.perf_counter() - t_start:.0f} s")
 

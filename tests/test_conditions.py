@@ -106,7 +106,18 @@ def test_denali_train_trains_and_tests_within_the_condition(tmp_path, samples, c
     def train(task, condition):
         cell = {"model": "cnn1d", "task": task, "split": "random", "resolution": "3x3", "condition": condition, "protocol": "clean", "seed": 42}
         out = tmp_path / task / condition
-        args = ["train", str(tmp_path / "3x3.zarr"), "--table", str(tmp_path / "3x3.parquet"), "--cell", json.dumps(cell), "--hyper", hyper]
+        args = [
+            "train",
+            str(tmp_path / "3x3.zarr"),
+            "--table",
+            str(tmp_path / "3x3.parquet"),
+            "--cell",
+            json.dumps(cell),
+            "--hyper",
+            hyper,
+            "--factory",
+            "denali_pipe.models:cnn1d",
+        ]
         return main([*args, "--validation-fraction", "0.2", "--outdir", str(out)]), out
 
     rc, out = train("shape", "light_off")

@@ -18,6 +18,7 @@ from denali_pipe.capture_sets import expected_sets
 from denali_pipe.objects import BACKGROUNDS, load_catalogue
 
 SCHEMA = str(REPO / "config" / "schema.yaml")
+HYPER = {"lr": 1e-3, "epochs": 1, "batch_size": 8, "norm": "raw"}
 PRESETS = sorted((REPO / "config" / "presets").glob("*.yaml"))
 
 
@@ -174,13 +175,27 @@ def test_dry_run_bad_config_argument(workflow_copy):
     assert "n_locations" in out, out
 
 
+def test_dry_run_leaves_out_a_model_set_to_null(workflow_copy, tmp_path):
+    path = tmp_path / "no_mlp.yaml"
+    path.write_text(yaml.safe_dump({"train": {"models": {"mlp": None}}}))
+    r = dry_run(workflow_copy, "results/table2.csv", "--configfile", str(path))
+    out = r.stdout + r.stderr
+    assert r.returncode == 0, out
+    assert "cnn1d_location" in out and "mlp_" not in out
+
+
 @pytest.mark.parametrize(
     "preset,key",
     [
         ({"rig": {"n_locations": 0}}, "n_locations"),
         ({"objects": ["A", "zeppelin"]}, "zeppelin"),
+        ({"train": {"benchmark_model": "resnet"}}, "train.benchmark_model: 'resnet' is not a registered model"),
+        (
+            {"train": {"models": {"tof": {"factory": "examples.no_such_model:tof", **{t: HYPER for t in ("location", "shape", "size")}}}}},
+            "train.models.tof.factory",
+        ),
     ],
-    ids=["n_locations", "unknown-object"],
+    ids=["n_locations", "unknown-object", "unknown-benchmark-model", "unresolved-factory"],
 )
 def test_dry_run_bad_preset(workflow_copy, tmp_path, preset, key):
     # (each run costs ~2 s of Snakemake start-up; the other bad values are covered in-process above)

@@ -90,7 +90,9 @@ def test_the_per_location_test_error_recombines_to_the_cells_test_metric(tmp_pat
     results = tmp_path / "results"
     write_dataset(x, samples, results / "datasets/3x3.zarr", results / "datasets/3x3.parquet", crop_start=0)
     cell = _cell(task=task)
-    result = run_cell(x, samples, cell, Hyper(lr=3e-3, epochs=2, batch_size=32, norm="raw"), validation_fraction=0.2)
+    result = run_cell(
+        x, samples, cell, Hyper(lr=3e-3, epochs=2, batch_size=32, norm="raw"), validation_fraction=0.2, factory=f"denali_pipe.models:{cell.model}"
+    )
     choice = CellChoice(cell.protocol, cell.resolution, cell.split, cell.model, cell.seed)
     run = results / choice.run_path(task)
     run.mkdir(parents=True)

@@ -8,7 +8,7 @@ import pytest
 from denali_pipe.cell_metrics import CellMetrics
 from denali_pipe.cells import Cell
 from denali_pipe.evaluate import Evaluation
-from denali_pipe.experiments.generalisation import ANY_DATA, BASE_TEST, CHANCE, CNN, MEAN_BASELINE, NONRR, RR, fig10, fig11, histogram_table, score_table
+from denali_pipe.experiments.generalisation import ANY_DATA, BASE_TEST, CHANCE, MEAN_BASELINE, MODEL, NONRR, RR, fig10, fig11, histogram_table, score_table
 
 NONRR_DATA = "results/datasets/nonrr_3x3.zarr"
 
@@ -36,15 +36,15 @@ EVALS = [_evaluation("location", 1, 0.08, 0.11), _evaluation("location", 2, 0.10
 def test_scores_stand_beside_the_cells_own_and_their_references():
     t = score_table(CELLS, EVALS, "non-RR sets").set_index(["task", "data", "predictor"])
     assert list(dict.fromkeys(t.index.get_level_values("task"))) == ["location", "shape"]
-    own = t.loc[("location", BASE_TEST, CNN)]
+    own = t.loc[("location", BASE_TEST, MODEL)]
     assert own["value"] == pytest.approx(0.05) and own["std"] == pytest.approx(np.std([0.04, 0.06], ddof=1)) and own["n_samples"] == 30
-    assert t.loc[("location", "non-RR sets", CNN), "value"] == pytest.approx(0.09)
+    assert t.loc[("location", "non-RR sets", MODEL), "value"] == pytest.approx(0.09)
     assert t.loc[("location", "non-RR sets", MEAN_BASELINE), "value"] == pytest.approx(0.12)
     assert t.loc[("location", BASE_TEST, MEAN_BASELINE), ["value", "std"]].tolist() == pytest.approx([0.10, 0.0])
     # shape: chance, not the majority class of a balanced training set (class "0", which a plate of class "1" never is)
     assert t.loc[("shape", ANY_DATA, CHANCE), "value"] == pytest.approx(1 / 30)
-    assert t.loc[("shape", "non-RR sets", CNN), "value"] == pytest.approx(0.1)
-    assert set(t["panel"]) == {"score"} and (t.loc[("shape", "non-RR sets", CNN), "n_seeds"] == 2)
+    assert t.loc[("shape", "non-RR sets", MODEL), "value"] == pytest.approx(0.1)
+    assert set(t["panel"]) == {"score"} and (t.loc[("shape", "non-RR sets", MODEL), "n_seeds"] == 2)
 
 
 def test_scores_refuse_evaluations_that_do_not_match_the_cells():
@@ -54,7 +54,7 @@ def test_scores_refuse_evaluations_that_do_not_match_the_cells():
         score_table(CELLS, [*EVALS, _evaluation("location", 3, 0.1, 0.1)], "x")
     with pytest.raises(ValueError, match="shape: 2 cells but 1 evaluations"):
         score_table(CELLS, EVALS[:3], "x")
-    with pytest.raises(ValueError, match="1D CNN cells"):
+    with pytest.raises(ValueError, match="the cells of one model"):
         score_table([*CELLS, _metrics("size", 1, 0.9, 0.5, model="mlp")], EVALS, "x")
 
 

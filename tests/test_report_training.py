@@ -4,9 +4,10 @@ import pandas as pd
 import pytest
 
 from denali_pipe.cell_metrics import CellMetrics
-from denali_pipe.cells import MODELS, SPLITS, TASKS, Cell, is_ill_posed
+from denali_pipe.cells import SPLITS, TASKS, Cell, is_ill_posed
 from denali_pipe.conditions import CONDITION_GROUPS, TABLES
 from denali_pipe.experiments.jitter import jitter_condition, jitter_curve
+from denali_pipe.models import PAPER_MODELS
 from denali_pipe.report.condition_table import condition_table, write_condition_table
 from denali_pipe.report.jitter import plot_jitter
 from denali_pipe.report.paper import CONDITION_TABLES, TABLE5, TABLE10
@@ -17,6 +18,7 @@ from denali_pipe.report.table5 import write_table5
 from denali_pipe.report.table10 import write_table10
 from denali_pipe.report.training_curves import write_training_curves
 
+MODELS = tuple(PAPER_MODELS)
 REG = {"mse": 0.0025, "rmse": 0.05, "mae": 0.04}
 CLS = {"top1": 0.5, "top5": 0.9, "precision": 0.45, "recall": 0.5, "f1": 0.47}
 
@@ -28,7 +30,7 @@ def _write_cell(root, model, task, split, seed, protocol="clean", score=0.0, res
     m = CellMetrics(
         cell=Cell(model=model, task=task, split=split, resolution=resolution, protocol=protocol, seed=seed, condition=condition),
         hyper={"lr": 1e-3, "epochs": 10, "batch_size": 64, "norm": "raw"},
-        selected_on="validation", n_train=700, n_validation=140, n_test=300, n_classes=30, input_shape=(3, 3, 57), params=82340,
+        selected_on="validation", n_train=700, n_validation=140, n_test=300, n_classes=30, input_shape=(3, 3, 57), params=82340, flops=164000,
         best_epoch=7, test=test, baseline={k: v / 2 for k, v in test.items()},
         train_seconds=36.0 * (1 + MODELS.index(model) if model in MODELS else 0.1), inference_seconds=0.36,
         train_samples_per_second=700.0, inference_samples_per_second=833.0, device="cpu",
@@ -58,11 +60,13 @@ def test_table5_has_every_split_na_for_ill_posed_and_the_paper_beside(tmp_path):
     assert cols.index("paper_loc_rmse") == cols.index("loc_rmse") + 2
 
 
-def test_table5_refuses_other_models_and_mixed_protocols(tmp_path):
+def test_table5_shows_one_model_of_one_protocol(tmp_path):
     a = _write_cell(tmp_path, "mlp", "location", "random", 42) / "metrics.json"
-    with pytest.raises(ValueError, match="1D CNN"):
-        write_table5([a], tmp_path / "t.csv")
+    write_table5([a], tmp_path / "t.csv")
+    assert set(pd.read_csv(tmp_path / "t.csv")["model"]) == {"mlp"}  # any registered model (train.benchmark_model)
     b = _write_cell(tmp_path, "cnn1d", "location", "random", 42) / "metrics.json"
+    with pytest.raises(ValueError, match=r"Table 5 shows one model; got models \['cnn1d', 'mlp'\]"):
+        write_table5([a, b], tmp_path / "t.csv")
     c = _write_cell(tmp_path, "cnn1d", "location", "random", 43, protocol="paper") / "metrics.json"
     with pytest.raises(ValueError, match="mix"):
         write_table5([b, c], tmp_path / "t.csv")
@@ -81,6 +85,10 @@ def test_table2_table10_speed_accuracy_and_curves(tmp_path):
     assert len(t10) == 12
     assert t10.loc[("cnn3d", "shape"), "paper_params"] == TABLE10[("cnn3d", "shape")]["params"]
     assert t10.loc[("cnn1d", "size"), "train_hours"] == pytest.approx(72 / 3600)
+    assert (t10["flops"] == 164000).all() and list(t10.columns).index("flops") == list(t10.columns).index("paper_params") + 1
+    # models in the order given (config order): a user's model first stays first
+    write_table2(nets[::-1], tmp_path / "table2_reversed.csv")
+    assert list(pd.read_csv(tmp_path / "table2_reversed.csv")["model"]) == list(MODELS)[::-1]
 
     write_speed_vs_accuracy([p / "metrics.json" for p in paths], tmp_path / "sva.png")
     sva = pd.read_csv(tmp_path / "sva.csv")
@@ -126,7 +134,7 @@ def test_condition_tables_have_both_resolutions_na_for_untrained_and_the_paper_a
 
 def test_condition_tables_refuse_other_cells(tmp_path):
     shape = _write_cell(tmp_path, "cnn1d", "shape", "random", 42) / "metrics.json"
-    with pytest.raises(ValueError, match="table8 shows the cnn1d size cells"):
+    with pytest.raises(ValueError, match="table8 shows the size cells of one model"):
         condition_table(load_runs([shape]), "table8", list(CONDITION_GROUPS))
     size_cell = _write_cell(tmp_path, "cnn1d", "size", "random", 42, condition="8inch") / "metrics.json"
     with pytest.raises(ValueError, match="table8 has no row for conditions"):

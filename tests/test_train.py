@@ -10,7 +10,7 @@ import torch
 
 from denali_pipe.cells import Cell
 from denali_pipe.classical import run_linear
-from denali_pipe.models import build_model
+from denali_pipe.models import PAPER_MODELS, cnn1d
 from denali_pipe.preprocess import normalise
 from denali_pipe.train import Hyper, fit, loss_for, partition, run_cell, targets
 
@@ -58,6 +58,11 @@ def _cell(task="location", split="random", protocol="clean", model="cnn1d", seed
 HP = Hyper(lr=3e-3, epochs=4, batch_size=32, norm="raw")
 
 
+def factory(model="cnn1d"):
+    """The registry entry of one of the paper's models, as config.yaml names it."""
+    return f"denali_pipe.models:{model}"
+
+
 def test_targets(data):
     _, samples = data
     y, classes = targets(samples, "shape")
@@ -72,7 +77,7 @@ def test_targets(data):
 
 def test_clean_protocol_selects_on_validation_and_tests_once(data):
     x, samples = data
-    res = run_cell(x, samples, _cell(), HP, validation_fraction=0.2)
+    res = run_cell(x, samples, _cell(), HP, validation_fraction=0.2, factory=factory())
     m, c = res.metrics, res.curves
     assert m.selected_on == "validation" and m.n_validation > 0
     assert m.n_train + m.n_validation + m.n_test == len(samples)
@@ -85,7 +90,7 @@ def test_clean_protocol_selects_on_validation_and_tests_once(data):
 
 def test_paper_protocol_selects_on_test(data):
     x, samples = data
-    res = run_cell(x, samples, _cell(task="shape", protocol="paper"), HP, validation_fraction=0.2)
+    res = run_cell(x, samples, _cell(task="shape", protocol="paper"), HP, validation_fraction=0.2, factory=factory())
     m, c = res.metrics, res.curves
     assert m.selected_on == "test" and m.n_validation == 0
     best = c[(c["part"] == "test") & (c["metric"] == "top1")].set_index("epoch")["value"]
@@ -96,17 +101,17 @@ def test_clean_normalisation_statistics_come_from_the_training_part_only(data):
     x, samples = data
     hp = Hyper(lr=1e-3, epochs=1, batch_size=64, norm="log_z")
     cell = _cell(task="size", split="location_held_out")
-    res = run_cell(x, samples, cell, hp, validation_fraction=0.2)
+    res = run_cell(x, samples, cell, hp, validation_fraction=0.2, factory=factory())
     y, _ = targets(samples, "size")
     split, val = partition(samples, y, cell, 0.2)
-    assert res.state["norm_stats"] == normalise(x[split.train], "log_z")[1]
-    assert res.state["norm_stats"] != normalise(x, "log_z")[1]
+    assert tuple(res.state["norm_stats"]) == normalise(x[split.train], "log_z")[1]
+    assert tuple(res.state["norm_stats"]) != normalise(x, "log_z")[1]
 
 
 def test_cells_are_deterministic_and_learn(data):
     x, samples = data
-    a = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2)
-    b = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2)
+    a = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory())
+    b = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory())
     assert a.metrics.test == b.metrics.test
     assert all(torch.equal(a.state["model"][k], b.state["model"][k]) for k in a.state["model"])
     assert a.metrics.test["top1"] > 0.8 > a.metrics.baseline["top1"]
@@ -125,7 +130,7 @@ def test_linear_cell_beats_the_baseline(data):
 def test_unknown_protocol_is_refused(data):
     x, samples = data
     with pytest.raises(ValueError, match="unknown protocol"):
-        run_cell(x, samples, _cell(protocol="sloppy"), HP, validation_fraction=0.2)
+        run_cell(x, samples, _cell(protocol="sloppy"), HP, validation_fraction=0.2, factory=factory())
 
 
 @pytest.mark.parametrize("model", ["mlp", "cnn1d", "cnn3d", "transformer"])
@@ -133,7 +138,7 @@ def test_fit_trains_every_batch_down_to_a_last_one_of_one_sample(data, model):
     x, samples = data
     hp = Hyper(lr=1e-3, epochs=1, batch_size=8, norm="raw")
     torch.manual_seed(0)
-    net = build_model(model, "shape", n=3, bins=BINS, n_classes=len(CLASSES))
+    net = PAPER_MODELS[model]("shape", len(CLASSES), (3, 3, BINS))
     y = torch.from_numpy(np.array(targets(samples, "shape")[0][:9]))  # pandas hands out read-only views
     seen = []
     fitted = fit(net, torch.from_numpy(x[:9]), y, hp, 0, loss_for("shape"), lambda e, rows, out: seen.append(len(rows)) or 0.0)
@@ -150,12 +155,12 @@ def test_fit_keeps_the_best_scoring_epoch_or_the_last(data, caplog):
         states.append({k: v.clone() for k, v in net.state_dict().items()})
         return {1: 0.0, 2: 5.0, 3: 1.0}[epoch]
 
-    net = build_model("cnn1d", "location", n=3, bins=BINS, n_classes=2)
+    net = cnn1d("location", 2, (3, 3, BINS))
     with caplog.at_level(logging.INFO, logger="denali_pipe.train"):
         fitted = fit(net, xt, yt, hp, 0, loss_for("location"), score, name="probe")
     assert fitted.best_epoch == 2 and fitted.epochs_run == 3 and fitted.samples_seen == 3 * len(xt)
     assert all(torch.equal(net.state_dict()[k], states[1][k]) for k in states[1])
     # stderr is no terminal under pytest: one log line per epoch, no bar
     assert [r.getMessage().split(",")[0] for r in caplog.records] == [f"probe: epoch {e}/3" for e in (1, 2, 3)]
-    net = build_model("cnn1d", "location", n=3, bins=BINS, n_classes=2)
+    net = cnn1d("location", 2, (3, 3, BINS))
     assert fit(net, xt, yt, hp, 0, loss_for("location")).best_epoch == 3

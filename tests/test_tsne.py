@@ -35,7 +35,9 @@ def test_separability_tells_clusters_from_a_cloud():
 def test_run_tsne_scores_only_the_cells_test_samples(tmp_path, data):  # noqa: F811
     x, samples = data
     cell = _cell(task="shape")
-    result = run_cell(x, samples, cell, Hyper(lr=3e-3, epochs=1, batch_size=64, norm="raw"), validation_fraction=0.2)
+    result = run_cell(
+        x, samples, cell, Hyper(lr=3e-3, epochs=1, batch_size=64, norm="raw"), validation_fraction=0.2, factory=f"denali_pipe.models:{cell.model}"
+    )
     run = tmp_path / "run"
     run.mkdir()
     (run / "metrics.json").write_text(result.metrics.to_json())

@@ -9,12 +9,14 @@ import browser
 import numpy as np
 import pandas as pd
 import pytest
+import torch
 from workflow import copy_workflow, job_counts, snakemake
 
 from denali_pipe.capture_sets import expected_sets
 from denali_pipe.conditions import TABLES as CONDITION_TABLES
 from denali_pipe.conditions import table_conditions
 from denali_pipe.experiments.fig9 import MEAN_BASELINE
+from denali_pipe.experiments.generalisation import MODEL
 from denali_pipe.geometry import select_locations
 from denali_pipe.io.store import open_set
 from denali_pipe.objects import load_catalogue
@@ -259,11 +261,73 @@ def test_jitter_sweep(tiny_run):
 
 def test_changing_one_models_hyperparameters_reruns_only_its_cells_and_tables(tiny_run, tmp_path):
     cfg = tmp_path / "lr.yaml"
-    cfg.write_text("train:\n  hyper:\n    mlp:\n      location: {lr: 0.002}\n")
+    cfg.write_text("train:\n  models:\n    mlp:\n      location: {lr: 0.002}\n")
     out = snakemake(tiny_run, "-n", "--configfile", "config/presets/tiny.yaml", str(cfg)).stdout
     jobs = job_counts(out)
     assert jobs == {"train": 1, "table2": 1, "table10": 1, "speed_vs_accuracy": 1, "all": 1, "total": 5}
     assert "mlp_location" in out
+
+
+def test_the_example_model_runs_through_table5_and_joins_the_benchmark(tiny_run, tmp_path):
+    """examples/tof.yaml registers a model outside the package and makes it
+    the benchmark model: Table 5 trains its cells from the tiny run's
+    datasets; Tables 2 and 10 add its random-split cells beside the
+    paper's four; the explorer offers it."""
+    from denali_pipe.explore.outputs import scan
+
+    wd = tmp_path / "wd"
+    shutil.copytree(tiny_run, wd, symlinks=True)
+    example = (*TINY, "examples/tof.yaml")
+    jobs = job_counts(snakemake(wd, "-n", "results/table5.csv", *example).stdout)
+    assert jobs == {"train": 13, "table5": 1, "total": 14}  # 5 splits x 3 tasks less the 2 ill-posed; nothing upstream
+    snakemake(wd, "--cores", "2", "results/table5.csv", *example)
+    t5 = pd.read_csv(wd / "results/table5.csv", keep_default_na=False).set_index("split")
+    assert set(t5["model"]) == {"tof"} and list(t5.index) == ["random", "repeats_grouped", "location_held_out", "shape_held_out", "size_held_out"]
+    assert 0 < float(t5.loc["random", "loc_rmse"]) < 2.0 and 0 <= float(t5.loc["random", "shape_top1"]) <= 1
+    m = json.loads((wd / "results/runs/clean/3x3/all/random/tof_shape/seed42/metrics.json").read_text())
+    assert m["params"] < 20_000 and m["flops"] > 0
+    # its random-split cells are Table 5's: Tables 2 and 10 only add them to the paper's four
+    assert job_counts(snakemake(wd, "-n", "results/table2.csv", "results/table10.csv", *example).stdout) == {"table2": 1, "table10": 1, "total": 2}
+    assert "tof" in {c.model for c in scan(wd / "results").choices("3x3")}
+
+
+def test_predict_and_export_a_tiny_capture_as_training_saw_it(tiny_run, tmp_path, capsys):
+    """`denali predict` on a release file of the tiny run answers what the
+    cells answer for the dataset's rows of that capture (the same
+    preprocessing, averaged over the repeats); `denali export` of the shape
+    cell gives its logits."""
+    from denali_pipe.cli import main
+    from denali_pipe.dataset import read_dataset
+    from denali_pipe.evaluate import load_cell, predict
+    from denali_pipe.export import load_export
+    from denali_pipe.predict import softmax
+
+    results = tiny_run / "results"
+    x, samples, _ = read_dataset(results / "datasets/3x3.zarr", results / "datasets/3x3.parquet")
+    set_name = "circle_8inch_3x3_lighton"
+    location = int(samples[samples.set == set_name].location.iloc[len(samples[samples.set == set_name]) // 2])
+    rows = samples.index[(samples.set == set_name) & (samples.location == location)]
+    runs = [results / f"runs/clean/3x3/all/random/cnn1d_{task}/seed42" for task in ("location", "shape", "size")]
+    capture = tiny_run / f"data/raw/{set_name}_NLOSdata/spad_histogram/{location:03d}.npy"
+    background = tiny_run / f"data/raw/NOOBJECT_8inch_3x3_lighton_NLOSdata/spad_histogram/{location:03d}.npy"
+    args = [*map(str, runs), str(capture), "--background", str(background), "--crop", str(results / "features/crop_3x3.json")]
+    assert main(["predict", *args]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["gantry_location"] == location and out["repeats"] == list(range(len(rows)))
+    xy = predict(load_cell(runs[0]), x[rows]).mean(axis=0)
+    assert (out["location"]["x_m"], out["location"]["y_m"]) == pytest.approx(tuple(xy), abs=1e-5)
+    shape = load_cell(runs[1])
+    p = softmax(predict(shape, x[rows])).mean(axis=0)
+    assert [(c["class"], c["probability"]) for c in out["shape"]["top5"]] == [
+        (shape.classes[i], pytest.approx(float(p[i]), abs=1e-5)) for i in np.argsort(-p)[:5]
+    ]
+    assert out["size"]["class"] in ("4inch", "8inch")
+    assert main(["export", str(runs[1]), str(tmp_path / "shape.pt")]) == 0
+    module, meta = load_export(tmp_path / "shape.pt")
+    with torch.no_grad():
+        logits = module(torch.from_numpy(x[rows])).numpy()
+    np.testing.assert_allclose(logits, predict(shape, x[rows]), rtol=1e-4, atol=1e-4)
+    assert meta["classes"] == shape.classes
 
 
 def test_training_cells_request_the_configured_gpus(tiny_run, tmp_path):
@@ -346,8 +410,8 @@ def test_fig10_and_fig11(tiny_run):
     assert set(scores.index.get_level_values("task")) == {"location", "shape", "size"}
     assert scores.loc[("shape", "any", "chance"), "value"] == pytest.approx(1 / 3)  # tiny's three base classes
     # 3 epochs: the path, not the numbers; every score a finite value in its metric's range
-    assert 0 < scores.loc[("location", "non-RR sets", "1D CNN"), "value"] < 2.0
-    assert 0 <= scores.loc[("size", "non-RR sets", "1D CNN"), "value"] <= 1 and (scores["n_seeds"].dropna() <= 1).all()
+    assert 0 < scores.loc[("location", "non-RR sets", MODEL), "value"] < 2.0
+    assert 0 <= scores.loc[("size", "non-RR sets", MODEL), "value"] <= 1 and (scores["n_seeds"].dropna() <= 1).all()
     hist = fig10[fig10["panel"] == "histogram"]
     assert set(hist["object"]) == {"generalization1white", "1"} and set(hist["size"]) == {"8inch"} and set(hist["light"]) == {"lightoff"}
     fig11 = pd.read_csv(tiny_run / "results/fig11.csv")

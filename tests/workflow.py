@@ -16,7 +16,7 @@ from pathlib import Path
 
 from conftest import REPO
 
-WORKFLOW_FILES = ("Snakefile", "rules", "config", "profiles", "envs", "report")
+WORKFLOW_FILES = ("Snakefile", "rules", "config", "profiles", "envs", "report", "examples")
 TABLE5 = "results/table5.csv"
 # The tiny preset cut to what still draws every Table 5 split and task: three
 # base shapes (shape_held_out tests one and carves validation from the other

@@ -52,6 +52,7 @@ class CellMetrics:
     validation_fraction: float | None = None  # None under `paper` (no validation part)
     threads: int | None = None
     selected_regularisation: float | None = None
+    flops: int | None = None  # one sample's forward pass (models.forward_flops); None for the linear model
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=1) + "\n"

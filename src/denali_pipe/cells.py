@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-MODELS = ("mlp", "cnn1d", "cnn3d", "transformer")
+# The networks are the registry's (config `train.models`, registry.py); this one is not a network.
 LINEAR = "linear"  # the classical reference model (classical.py)
 TASKS = ("location", "shape", "size")
 SPLITS = ("random", "repeats_grouped", "location_held_out", "shape_held_out", "size_held_out")

@@ -1,8 +1,9 @@
 """A saved training cell, loaded to predict, embed or score other data.
 
-A cell's run directory holds `model.pt` (train.run_cell's `Result.state`:
-the selected epoch's weights, the normalisation statistics, the class names,
-the cell and its settings). `load_cell` rebuilds the model from it; the
+A cell's run directory holds `model.pt` (a `saved_cell.SavedCell` record:
+the selected epoch's weights, the model's factory, its input shape, the
+normalisation statistics, the class names, the cell and its settings).
+`load_cell` rebuilds the model from it through its factory; the
 functions below take (N, n, n, T) background-subtracted features, the same
 kind of array the cell was trained on, and return per-sample arrays.
 
@@ -22,13 +23,11 @@ import pandas as pd
 import torch
 from torch import nn
 
-from denali_pipe.cell_metrics import METRICS_FILE, CellMetrics
 from denali_pipe.cells import Cell
-from denali_pipe.models import build_model
 from denali_pipe.preprocess import normalise
+from denali_pipe.registry import build
+from denali_pipe.saved_cell import SavedCell
 from denali_pipe.train import EVAL_BATCH, SIZE_CLASSES, Hyper, infer, task_metrics
-
-MODEL_FILE = "model.pt"
 
 
 @dataclass(frozen=True)
@@ -51,25 +50,16 @@ class TrainedCell:
 
 
 def load_cell(run_dir: Path) -> TrainedCell:
-    """The cell saved in `run_dir` (a neural cell; the linear reference
-    model saves no weights). ValueError naming the file if it is missing or
-    not a cell's state; the model's input shape comes from the cell's
-    metrics.json beside it."""
-    path = Path(run_dir) / MODEL_FILE
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-        cell, hyper, weights = Cell(**state["cell"]), Hyper(**state["hyper"]), state["model"]
-    except (OSError, RuntimeError, KeyError, TypeError) as e:
-        raise ValueError(f"{path}: not a training cell's saved model ({e})") from None
-    if "baseline_output" not in state:
-        raise ValueError(f"{path}: saved before cells kept their baseline's output; retrain the cell")
-    n, _, bins = CellMetrics.read(Path(run_dir) / METRICS_FILE).input_shape
-    classes = state["classes"]
-    model = build_model(cell.model, cell.task, n=n, bins=bins, n_classes=2 if classes is None else len(classes))
-    model.load_state_dict(weights)
+    """The cell saved in `run_dir` (a network cell; the linear reference
+    model's model.pt is not a cell record), rebuilt through the factory the
+    record names. ValueError naming the file if it is missing or not a cell
+    record, or naming the config key if the factory does not resolve."""
+    saved = SavedCell.load(run_dir)
+    classes = saved.classes
+    model = build(saved.cell.model, saved.factory, saved.cell.task, saved.input_shape, 2 if classes is None else len(classes))
+    model.load_state_dict(saved.model)
     model.eval()
-    stats = None if state["norm_stats"] is None else tuple(float(v) for v in state["norm_stats"])
-    return TrainedCell(model, cell, hyper, stats, classes, (int(n), int(n), int(bins)), np.asarray(state["baseline_output"], np.float64))
+    return TrainedCell(model, saved.cell, Hyper(**saved.hyper), saved.norm_stats, classes, saved.input_shape, np.asarray(saved.baseline_output, np.float64))
 
 
 def _inputs(trained: TrainedCell, x: np.ndarray) -> torch.Tensor:

@@ -1,4 +1,6 @@
-"""The four benchmark models of the DENALI paper (supplement §11.2, REFERENCE Part 2 §2).
+"""The four benchmark models of the DENALI paper (supplement §11.2, REFERENCE Part 2 §2),
+and their factories: entries of the model registry like any user model
+(`registry`, config `train.models`).
 
 Every model takes a batch of histograms `x` of shape (B, n, n, bins): n zones per
 side (3 or 8) and `bins` time bins (128, or fewer where the pipeline crops the
@@ -15,16 +17,15 @@ from (n, bins) at construction, so parameter counts are known before any forward
 
 from __future__ import annotations
 
+import copy
 import math
 
 import torch
 from torch import nn
 
-from denali_pipe.cells import MODELS, TASKS
+from denali_pipe.registry import N_LOCATION_OUTPUTS
 
 DROPOUT = 0.1
-N_LOCATION_OUTPUTS = 2  # x, y in metres
-N_SIZE_CLASSES = 2  # 4inch, 8inch
 
 
 def n_params(model: nn.Module) -> int:
@@ -199,19 +200,47 @@ class Transformer(nn.Module):
         return self.head(self.encoder(h)[:, 0])  # (B, bins + 1, d) -> CLS (B, d) -> (B, n_out)
 
 
-def build_model(name: str, task: str, n: int, bins: int, n_classes: int) -> nn.Module:
-    """The paper's model `name` (one of MODELS) for `task` (one of TASKS).
+# The factories (registry's contract): factory(task, n_outputs, input_shape (n, n, T)) -> nn.Module.
 
-    Input (B, n, n, bins) float; output (B, 2) for location (metres), (B, n_classes)
-    logits for shape, (B, 2) logits for size. `n_classes` applies to shape only.
-    """
-    if name not in MODELS or task not in TASKS:
-        raise ValueError(f"unknown model/task {name!r}/{task!r}; models {MODELS}, tasks {TASKS}")
-    n_out = {"location": N_LOCATION_OUTPUTS, "shape": n_classes, "size": N_SIZE_CLASSES}[task]
-    if name == "mlp":
-        return MLP(n, bins, n_out)
-    if name == "cnn1d":
-        return CNN1d(n, n_out, with_out_tanh=task == "location")
-    if name == "cnn3d":
-        return CNN3dShallow(n, bins, n_out) if task == "shape" else CNN3dDeep(n_out)
-    return Transformer(n, bins, n_out, classifier=task != "location")
+
+def mlp(task: str, n_outputs: int, input_shape: tuple[int, int, int]) -> nn.Module:
+    n, _, bins = input_shape
+    return MLP(n, bins, n_outputs)
+
+
+def cnn1d(task: str, n_outputs: int, input_shape: tuple[int, int, int]) -> nn.Module:
+    return CNN1d(input_shape[0], n_outputs, with_out_tanh=task == "location")
+
+
+def cnn3d(task: str, n_outputs: int, input_shape: tuple[int, int, int]) -> nn.Module:
+    n, _, bins = input_shape
+    return CNN3dShallow(n, bins, n_outputs) if task == "shape" else CNN3dDeep(n_outputs)
+
+
+def transformer(task: str, n_outputs: int, input_shape: tuple[int, int, int]) -> nn.Module:
+    n, _, bins = input_shape
+    return Transformer(n, bins, n_outputs, classifier=task != "location")
+
+
+# The paper's four by the names config.yaml registers them under.
+PAPER_MODELS = {"mlp": mlp, "cnn1d": cnn1d, "cnn3d": cnn3d, "transformer": transformer}
+
+
+def forward_flops(model: nn.Module, input_shape: tuple[int, int, int]) -> int:
+    """Floating-point operations of one sample's forward pass, as torch's
+    FlopCounterMode counts them: 2 per multiply-add of the matrix products,
+    convolutions and attention; elementwise operations, norms and activations
+    are not counted (they are a few % for these models).
+
+    Counted on a copy in training mode: in eval mode PyTorch runs the
+    Transformer's encoder layers as one fused kernel that the counter does not
+    see, and the copy keeps the model's BatchNorm statistics untouched."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    probe = copy.deepcopy(model).train()
+    param = next(probe.parameters(), None)
+    x = torch.zeros(1, *input_shape, device=None if param is None else param.device)
+    counter = FlopCounterMode(display=False)
+    with counter, torch.no_grad():
+        probe(x)
+    return int(counter.get_total_flops())

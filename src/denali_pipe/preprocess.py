@@ -28,7 +28,9 @@ training split, so it lives with training (`normalise`), not here.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -136,6 +138,15 @@ class CropWindow:
     @classmethod
     def from_dict(cls, d: dict) -> "CropWindow":
         return cls(int(d["crop_start"]), np.asarray(d["zone_starts"], dtype=int))
+
+
+def read_crop_window(path: Path) -> CropWindow:
+    """The crop window `denali crop-window` wrote (results/features/crop_<res>.json);
+    ValueError naming the file when it is not one."""
+    try:
+        return CropWindow.from_dict(json.loads(Path(path).read_text()))
+    except (ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"{path}: not a crop window ({type(e).__name__}: {e})") from None
 
 
 def crop_window(backgrounds: list[np.ndarray], fraction: float = DIRECT_END_FRACTION) -> CropWindow:

@@ -36,8 +36,10 @@ from tqdm import tqdm
 from denali_pipe import metrics as M
 from denali_pipe.cell_metrics import CellMetrics
 from denali_pipe.cells import PROTOCOLS, TASKS, Cell
-from denali_pipe.models import build_model, n_params
+from denali_pipe.models import forward_flops, n_params
 from denali_pipe.preprocess import normalise
+from denali_pipe.registry import build
+from denali_pipe.saved_cell import SavedCell
 from denali_pipe.splits import Split, make_split, validation_split
 
 log = logging.getLogger(__name__)
@@ -61,7 +63,7 @@ class Hyper:
 class Result:
     metrics: CellMetrics
     curves: pd.DataFrame  # long: epoch, part, metric, value
-    state: dict  # model state_dict at the selected epoch plus what evaluation needs
+    state: dict  # what model.pt holds: a network's `SavedCell` record (saved_cell), the linear model's own dict
 
 
 @dataclass
@@ -223,11 +225,20 @@ def fit(
 
 
 def run_cell(
-    x: np.ndarray, samples: pd.DataFrame, cell: Cell, hp: Hyper, validation_fraction: float, device: str = "cpu", budget_seconds: float | None = None
+    x: np.ndarray,
+    samples: pd.DataFrame,
+    cell: Cell,
+    hp: Hyper,
+    validation_fraction: float,
+    factory: str,
+    device: str = "cpu",
+    budget_seconds: float | None = None,
 ) -> Result:
     """Train one cell on (N, n, n, T) features `x` with sample table `samples`
     (`fit`, with the selection metric of `selection_key` on the validation
-    part or, under `paper`, the test split; `budget_seconds` as there)."""
+    part or, under `paper`, the test split; `budget_seconds` as there). The
+    network is model `cell.model` built by `factory` ('package.module:factory',
+    the registry's contract)."""
     if cell.protocol not in PROTOCOLS:
         raise ValueError(f"unknown protocol {cell.protocol!r}; expected one of {PROTOCOLS}")
     torch.manual_seed(cell.seed)
@@ -242,7 +253,9 @@ def run_cell(
     yt = torch.from_numpy(np.array(y))  # pandas hands out read-only views
     n_classes = 2 if cell.task == "location" else len(classes)
 
-    model = build_model(cell.model, cell.task, n=x.shape[1], bins=x.shape[-1], n_classes=n_classes).to(dev)
+    input_shape = tuple(int(d) for d in x.shape[1:])
+    model = build(cell.model, factory, cell.task, input_shape, n_classes).to(dev)
+    flops = forward_flops(model, input_shape)
     select_on = ("test", split.test) if val is None else ("validation", val)
     metric, sign = selection_key(cell.task)
     x_sel, y_sel = xn[select_on[1]], y[select_on[1]]
@@ -274,8 +287,9 @@ def run_cell(
         n_validation=int(0 if val is None else len(val)),
         n_test=int(len(split.test)),
         n_classes=n_classes,
-        input_shape=tuple(int(d) for d in x.shape[1:]),
+        input_shape=input_shape,
         params=n_params(model),
+        flops=flops,
         best_epoch=fitted.best_epoch,
         epochs_run=fitted.epochs_run,
         samples_seen=fitted.samples_seen,
@@ -290,16 +304,18 @@ def run_cell(
         device=str(dev),
         threads=torch.get_num_threads(),
     )
-    state = {
-        "model": fitted.state,
-        "norm_stats": stats,
-        "classes": classes,
-        "cell": asdict(cell),
-        "hyper": asdict(hp),
+    state = SavedCell(
+        cell=cell,
+        factory=factory,
+        input_shape=input_shape,
+        classes=classes,
+        hyper=asdict(hp),
+        norm_stats=stats,
         # what the cell's mean / majority baseline predicts, so that a saved cell scores its baseline on other data
-        "baseline_output": [float(v) for v in baseline_output(cell.task, y[split.train], n_classes)],
-    }
-    return Result(result, pd.DataFrame(rows, columns=["epoch", "part", "metric", "value"]), state)
+        baseline_output=[float(v) for v in baseline_output(cell.task, y[split.train], n_classes)],
+        model=fitted.state,
+    )
+    return Result(result, pd.DataFrame(rows, columns=["epoch", "part", "metric", "value"]), state.to_record())
 
 
 def metric_rows(epoch: int, part: str, values: dict) -> list[tuple]:

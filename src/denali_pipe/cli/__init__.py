@@ -12,12 +12,30 @@ from __future__ import annotations
 import argparse
 import logging
 
-from denali_pipe.cli import explore, fig9, fit, generalisation, ingest, jitter, poses, preprocess, release, report, rig, targets, train, tsne, twin
+from denali_pipe.cli import (
+    explore,
+    export,
+    fig9,
+    fit,
+    generalisation,
+    ingest,
+    jitter,
+    poses,
+    predict,
+    preprocess,
+    release,
+    report,
+    rig,
+    targets,
+    train,
+    tsne,
+    twin,
+)
 
 log = logging.getLogger("denali")
 
 # Verbs for people, then the stage verbs in the order the DAG runs them.
-USER_MODULES = (targets, release, explore)
+USER_MODULES = (targets, release, predict, export, explore)
 STAGE_MODULES = (rig, ingest, poses, preprocess, train, report, twin, fit, fig9, generalisation, tsne, jitter)
 
 

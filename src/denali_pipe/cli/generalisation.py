@@ -55,8 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--out", required=True, help="output JSON: the cell's metrics and its baseline's on the dataset")
     s.set_defaults(func=cmd_evaluate)
     for name, what in (
-        ("fig10", "Fig 10: non-RR objects' returns, and base 1D CNN cells scored on them"),
-        ("fig11", "Fig 11: base 1D CNN cells scored on the italic objects"),
+        ("fig10", "Fig 10: non-RR objects' returns, and the benchmark model's base cells scored on them"),
+        ("fig11", "Fig 11: the benchmark model's base cells scored on the italic objects"),
     ):
         s = sub.add_parser(name, help=what)
         s.add_argument("--cells", nargs="+", required=True, help="the cells' metrics.json (their own test scores)")

@@ -16,7 +16,8 @@ def cmd_jitter(args: argparse.Namespace) -> None:
 
     runs = load_runs([Path(p) for p in args.runs])
     curve = jitter_curve(runs)
-    title = f"1D CNN on the 3x3 centre zone, lights on, against timing jitter (random split, {protocol_of(runs)} protocol)"
+    models = ", ".join(sorted(set(runs["model"])))
+    title = f"{models} on the 3x3 centre zone, lights on, against timing jitter (random split, {protocol_of(runs)} protocol)"
     plot_jitter(curve, title, Path(args.out))
     log.info("wrote %s and its CSV from %d cells:\n%s", args.out, len(runs), curve.to_string(index=False))
 

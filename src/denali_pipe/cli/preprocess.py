@@ -25,14 +25,12 @@ def cmd_crop_window(args: argparse.Namespace) -> None:
 
 
 def cmd_preprocess(args: argparse.Namespace) -> None:
-    import json
-
     from denali_pipe.io.features import write_features
     from denali_pipe.io.store import open_set
-    from denali_pipe.preprocess import CropWindow, preprocess
+    from denali_pipe.preprocess import preprocess, read_crop_window
 
     store, bg = open_set(Path(args.store)), open_set(Path(args.background))
-    window = CropWindow.from_dict(json.loads(Path(args.crop).read_text()))
+    window = read_crop_window(Path(args.crop))
     try:
         feats = preprocess(store.histograms[...], store.locations, bg.histograms[...], bg.locations, window)
     except ValueError as e:

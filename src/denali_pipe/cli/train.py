@@ -19,6 +19,7 @@ def cmd_train(args: argparse.Namespace) -> None:
     from denali_pipe.cells import LINEAR, Cell
     from denali_pipe.conditions import condition_view
     from denali_pipe.dataset import read_dataset
+    from denali_pipe.saved_cell import MODEL_FILE
     from denali_pipe.train import Hyper, run_cell
 
     torch.set_num_threads(args.threads)
@@ -33,13 +34,15 @@ def cmd_train(args: argparse.Namespace) -> None:
         from denali_pipe.classical import run_linear
 
         result = run_linear(x, samples, cell, args.validation_fraction)
+    elif args.factory is None:
+        raise ValueError(f"train: model {cell.model!r} is a network and needs --factory 'package.module:factory'")
     else:
         device = "cuda" if torch.cuda.is_available() else "cpu"
-        result = run_cell(x, samples, cell, Hyper(**args.hyper), args.validation_fraction, device, args.budget_seconds)
+        result = run_cell(x, samples, cell, Hyper(**args.hyper), args.validation_fraction, args.factory, device, args.budget_seconds)
     with atomic_dir(Path(args.outdir)) as tmp:
         (tmp / METRICS_FILE).write_text(result.metrics.to_json())
         result.curves.to_csv(tmp / "curves.csv", index=False)
-        torch.save(result.state, tmp / "model.pt")
+        torch.save(result.state, tmp / MODEL_FILE)
     m = result.metrics
     log.info("wrote %s: test %s, %.1f s training (%.0f samples/s)", args.outdir, m.test, m.train_seconds, m.train_samples_per_second)
 
@@ -50,6 +53,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--table", required=True, help="datasets/<res>.parquet")
     s.add_argument("--cell", type=json_arg, required=True, help='JSON {"model", "task", "split", "resolution", "condition", "protocol", "seed"}')
     s.add_argument("--hyper", type=json_arg, required=True, help='JSON {"lr", "epochs", "batch_size", "norm"} ({} for the linear model)')
+    s.add_argument(
+        "--factory", default=None, help="the network's factory 'package.module:factory' (config train.models.<model>.factory; not for the linear model)"
+    )
     s.add_argument("--validation-fraction", type=float, required=True, help="validation share of the training split (clean protocol)")
     s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     s.add_argument("--budget-seconds", type=float, default=None, help="stop a network's training after this much training time")

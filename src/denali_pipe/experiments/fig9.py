@@ -37,8 +37,9 @@ import torch
 from torch import nn
 
 from denali_pipe.metrics import predict_mean_baseline, regression_metrics
-from denali_pipe.models import build_model
+from denali_pipe.models import cnn1d
 from denali_pipe.preprocess import normalise
+from denali_pipe.registry import N_LOCATION_OUTPUTS
 from denali_pipe.seeds import derive_seed, rng_for
 from denali_pipe.train import Hyper, fit, infer, loss_for
 from denali_pipe.transforms import FIDELITIES, Pairs, Transforms, apply, split_pairs
@@ -80,7 +81,7 @@ def train_localiser(x: np.ndarray, y: np.ndarray, hp: Hyper, seed: int) -> tuple
     xn, stats = normalise(x, hp.norm)
     xt = torch.from_numpy(np.ascontiguousarray(xn[:, None, None, :]))
     yt = torch.from_numpy(np.ascontiguousarray(y, np.float32))
-    model = build_model("cnn1d", "location", n=1, bins=x.shape[-1], n_classes=2)
+    model = cnn1d("location", N_LOCATION_OUTPUTS, (1, 1, x.shape[-1]))
     fit(model, xt, yt, hp, seed, loss_for("location"), name="fig9 localiser")
     return model, stats
 

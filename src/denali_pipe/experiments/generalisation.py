@@ -1,9 +1,9 @@
-"""Figs 10 and 11 (paper supplement §8): the benchmark's 1D CNN cells, trained
+"""Figs 10 and 11 (paper supplement §8): the benchmark model's cells (the paper's: the 1D CNN), trained
 on the base (retroreflective, upright) objects, scored on objects they never
 saw: the non-retroreflective cardstock and white plates (Fig 10: location,
 shape, size) and the italic 1, A and circle (Fig 11: location, shape).
 
-The cells are the random-split 1D CNN cells the tables train (every seed);
+The cells are the random-split benchmark-model cells the tables train (every seed);
 `denali evaluate` scores each on a variant dataset (`evaluate.Evaluation`,
 every sample of it, both lightings). Beside each score stand the cells'
 own test scores on the base data (`CellMetrics.test`) and a reference a
@@ -21,7 +21,7 @@ Each figure's CSV is one long table; `panel` says which part of the figure a
 row belongs to:
 - `score`: task, metric (`report.runs.HEADLINE`: RMSE in m, Top-1), data
   (`BASE_TEST`, the variant's sets, or `ANY_DATA` for chance), predictor
-  (`CNN`, `MEAN_BASELINE`, `CHANCE`), value (mean over seeds), std (ddof 1;
+  (`MODEL`, `MEAN_BASELINE`, `CHANCE`), value (mean over seeds), std (ddof 1;
   0 for one seed), n_seeds, n_samples (per seed);
 - `histogram` (Fig 10): object, data (`NONRR` or `RR`), size, light,
   location, bin (absolute, 3/128 m of optical path), value (mean counts over
@@ -43,7 +43,8 @@ from denali_pipe.report.runs import HEADLINE
 
 BASE_TEST = "base test split"
 ANY_DATA = "any"  # the `data` of chance, which does not depend on the samples
-CNN, MEAN_BASELINE, CHANCE = "1D CNN", "predict the training mean", "chance"
+# The cells' predictor (the title names its model: train.benchmark_model).
+MODEL, MEAN_BASELINE, CHANCE = "trained model", "predict the training mean", "chance"
 NONRR, RR = "non-retroreflective", "retroreflective"
 VARIANT_DATA = {"fig10": "non-RR sets", "fig11": "italic sets"}
 METRIC_LABELS = {"rmse": "RMSE (m), lower is better", "top1": "Top-1 accuracy, higher is better"}
@@ -62,12 +63,12 @@ def score_table(cells: list[CellMetrics], evaluations: list[Evaluation], variant
     metric on their own test split and on the variant dataset, each beside
     its reference.
 
-    `cells` must be 1D CNN cells; every evaluation must be of one of them
+    `cells` must be cells of one model; every evaluation must be of one of them
     (the same cell and seed), all on one dataset, one per cell. ValueError
     otherwise."""
     models = {m.cell.model for m in cells}
-    if models != {"cnn1d"}:
-        raise ValueError(f"the figure shows 1D CNN cells; got models {sorted(models)}")
+    if len(models) != 1:
+        raise ValueError(f"the figure shows the cells of one model; got models {sorted(models)}")
     tasks = [t for t in TASKS if t in {m.cell.task for m in cells}]
     datasets = sorted({e.dataset for e in evaluations})
     if len(datasets) != 1:
@@ -84,8 +85,8 @@ def score_table(cells: list[CellMetrics], evaluations: list[Evaluation], variant
         if not evals or len(evals) != len(mine):
             raise ValueError(f"{task}: {len(mine)} cells but {len(evals)} evaluations on {datasets[0]}; expected one per cell")
         parts = [
-            (BASE_TEST, CNN, [m.test[metric] for m in mine], mine[0].n_test),
-            (variant_data, CNN, [e.metrics[metric] for e in evals], evals[0].n_samples),
+            (BASE_TEST, MODEL, [m.test[metric] for m in mine], mine[0].n_test),
+            (variant_data, MODEL, [e.metrics[metric] for e in evals], evals[0].n_samples),
         ]
         if task == "location":
             parts += [
@@ -156,8 +157,8 @@ def _plot_scores(axes, scores: pd.DataFrame, variant_data: str) -> None:
     for ax, task in zip(axes, dict.fromkeys(scores["task"])):
         s = scores[scores["task"] == task]
         metric = s["metric"].iloc[0]
-        cnn = s[s["predictor"] == CNN].set_index("data").loc[list(order)]
-        ax.bar(range(len(order)), cnn["value"], yerr=cnn["std"], capsize=4, color=["tab:blue", "tab:orange"], width=0.6, label=CNN)
+        cnn = s[s["predictor"] == MODEL].set_index("data").loc[list(order)]
+        ax.bar(range(len(order)), cnn["value"], yerr=cnn["std"], capsize=4, color=["tab:blue", "tab:orange"], width=0.6, label=MODEL)
         for i, v in enumerate(cnn["value"]):
             ax.annotate(f"{v:.3g}", (i, v), textcoords="offset points", xytext=(0, -10 if v > 0 else 2), ha="center", fontsize=7)
         if task == "location":
@@ -180,7 +181,7 @@ def _plot_scores(axes, scores: pd.DataFrame, variant_data: str) -> None:
 
 def _title(cells: list[CellMetrics]) -> str:
     c = cells[0].cell
-    return f"1D CNN cells trained on the base objects ({c.resolution}, {c.split} split, {c.protocol} protocol)"
+    return f"{c.model} cells trained on the base objects ({c.resolution}, {c.split} split, {c.protocol} protocol)"
 
 
 def fig10(cells: list[CellMetrics], evaluations: list[Evaluation], histograms: pd.DataFrame, out_png: Path) -> pd.DataFrame:

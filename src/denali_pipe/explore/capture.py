@@ -20,7 +20,7 @@ from denali_pipe.capture_sets import CaptureSet
 from denali_pipe.explore.outputs import POSITIONS, SCENE, TRANSFORMS, Inventory, crop_path, features_path, index_path, store_path, twin_path
 from denali_pipe.io.features import read_features
 from denali_pipe.io.store import CaptureStore, open_set
-from denali_pipe.preprocess import CropWindow
+from denali_pipe.preprocess import CropWindow, read_crop_window
 from denali_pipe.transforms import apply, read_transforms
 from denali_pipe.twin.render import read_twin
 
@@ -126,10 +126,7 @@ def background_mean(store: CaptureStore, location: int) -> np.ndarray:
 
 @lru_cache(maxsize=2)
 def _crop(path: Path, _stamp: int) -> CropWindow:
-    try:
-        return CropWindow.from_dict(json.loads(path.read_text()))
-    except (ValueError, KeyError) as e:
-        raise ValueError(f"{path}: not a crop window ({type(e).__name__}: {e})") from None
+    return read_crop_window(path)
 
 
 def crop_window(inv: Inventory, resolution: str) -> CropWindow | None:

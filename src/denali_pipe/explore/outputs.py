@@ -16,8 +16,8 @@ import pandas as pd
 
 from denali_pipe.capture_sets import CaptureSet, parse_set_name
 from denali_pipe.cells import ALL, TASKS, is_ill_posed
-from denali_pipe.evaluate import MODEL_FILE
 from denali_pipe.geometry import RESOLUTIONS
+from denali_pipe.saved_cell import MODEL_FILE
 
 ZARR = ".zarr"
 STORES = "store"

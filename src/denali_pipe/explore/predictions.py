@@ -16,8 +16,10 @@ import pandas as pd
 
 from denali_pipe.cell_metrics import METRICS_FILE, CellMetrics
 from denali_pipe.dataset import read_dataset
-from denali_pipe.evaluate import MODEL_FILE, TrainedCell, load_cell, predict, score
+from denali_pipe.evaluate import TrainedCell, load_cell, predict, score
 from denali_pipe.explore.outputs import CellChoice, Inventory, dataset_paths
+from denali_pipe.predict import softmax
+from denali_pipe.saved_cell import MODEL_FILE
 from denali_pipe.train import partition, targets
 
 # What the per-location heat map shows for each task: the `evaluate.score`
@@ -40,17 +42,11 @@ def trained_cell(inv: Inventory, choice: CellChoice, task: str) -> TrainedCell:
     return _cell(run_dir, _stamp(run_dir / MODEL_FILE))
 
 
-def softmax(logits: np.ndarray) -> np.ndarray:
-    """Class probabilities (C,) from logits (C,)."""
-    e = np.exp(logits - logits.max())
-    return e / e.sum()
-
-
 def capture_output(trained: TrainedCell, x: np.ndarray) -> np.ndarray:
     """The cell's output for one capture repeat x (n, n, T): (2,) x, y in
     metres for location, (C,) class probabilities otherwise."""
     out = predict(trained, x[None])[0]
-    return out if trained.cell.task == "location" else softmax(out)
+    return out if trained.cell.task == "location" else softmax(out[None])[0]
 
 
 @lru_cache(maxsize=2)

@@ -1,6 +1,6 @@
-"""Tables 7-9: the 1D CNN trained and tested within a condition (size,
-lighting, object type, gantry quadrant: conditions.py), one task per table,
-at every resolution trained, beside the paper's numbers (published at 8x8
+"""Tables 7-9: one model (train.benchmark_model; the paper's: the 1D CNN)
+trained and tested within a condition (size, lighting, object type, gantry
+quadrant: conditions.py), one task per table, at every resolution trained, beside the paper's numbers (published at 8x8
 only, so the 3x3 rows have none)."""
 
 from __future__ import annotations
@@ -15,8 +15,6 @@ from denali_pipe.geometry import RESOLUTIONS
 from denali_pipe.report.paper import CONDITION_TABLES, CONDITION_TABLES_RESOLUTION
 from denali_pipe.report.runs import METRICS, NA, load_runs, protocol_of, seed_stats
 
-MODEL = "cnn1d"
-
 
 def condition_table(runs: pd.DataFrame, table: str, groups: list[str]) -> pd.DataFrame:
     """One row per resolution (of those trained) and condition of `table`
@@ -26,9 +24,9 @@ def condition_table(runs: pd.DataFrame, table: str, groups: list[str]) -> pd.Dat
     position or majority class), then the mean training and test sizes and
     n_seeds. A condition without cells (ill-posed there) reads n/a."""
     task, conditions = table_conditions(table, groups)
-    wrong = sorted({(m, t) for m, t in zip(runs["model"], runs["task"])} - {(MODEL, task)})
-    if wrong:
-        raise ValueError(f"{table} shows the {MODEL} {task} cells; got {wrong}")
+    got = sorted({(m, t) for m, t in zip(runs["model"], runs["task"])})
+    if len(got) != 1 or got[0][1] != task:
+        raise ValueError(f"{table} shows the {task} cells of one model; got {got}")
     unknown = sorted(set(runs["condition"]) - set(conditions))
     if unknown:
         raise ValueError(f"{table} has no row for conditions {unknown}; its rows are {list(conditions)}")
@@ -40,7 +38,7 @@ def condition_table(runs: pd.DataFrame, table: str, groups: list[str]) -> pd.Dat
     rows = []
     for res in [r for r in RESOLUTIONS if r in set(runs["resolution"])]:
         for condition in conditions:
-            row = {"resolution": res, "condition_group": GROUP_OF[condition], "condition": condition, "protocol": protocol}
+            row = {"resolution": res, "condition_group": GROUP_OF[condition], "condition": condition, "model": got[0][0], "protocol": protocol}
             trained = (res, condition) in stats.index
             s = stats.loc[(res, condition)] if trained else None
             for name in names:

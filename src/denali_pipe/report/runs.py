@@ -35,6 +35,7 @@ def load_runs(paths: list[Path]) -> pd.DataFrame:
             {
                 **asdict(m.cell),
                 "params": m.params,
+                "flops": m.flops,
                 "n_train": m.n_train,
                 "n_validation": m.n_validation,
                 "n_test": m.n_test,

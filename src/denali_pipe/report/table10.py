@@ -1,5 +1,6 @@
-"""Table 10: per model and task, parameters, data sizes, training and inference
-cost, beside the paper's. Hours are measured wall-clock of our cells (mean
+"""Table 10: per model (in the order given) and task, parameters, forward
+FLOPs per sample, data sizes, training and inference cost, beside the
+paper's (which prints no FLOPs). Hours are measured wall-clock of our cells (mean
 over seeds), on the device each cell ran on; `epochs` is the configured
 count and `epochs_run` what the time budget allowed (mean over seeds)."""
 
@@ -10,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 
 from denali_pipe.atomic import atomic_file
-from denali_pipe.cells import MODELS, TASKS
+from denali_pipe.cells import TASKS
 from denali_pipe.report.paper import TABLE10, TABLE10_COLUMNS
 from denali_pipe.report.runs import load_runs, protocol_of, seed_stats
 
@@ -22,7 +23,7 @@ def write_table10(metrics_paths: list[Path], out: Path) -> None:
     stats = seed_stats(runs, ["model", "task"], ["train_hours", "inference_hours", "train_samples_per_second"]).set_index(["model", "task"])
     first = runs.groupby(["model", "task"]).first()
     rows = []
-    for model in MODELS:
+    for model in dict.fromkeys(runs["model"]):
         for task in TASKS:
             if (model, task) not in stats.index:
                 continue
@@ -42,6 +43,8 @@ def write_table10(metrics_paths: list[Path], out: Path) -> None:
                 if c.endswith("hours"):
                     row[f"{c}_std"] = s[f"{c}_std"]
                 row[f"paper_{c}"] = paper.get(c, "")
+                if c == "params":
+                    row["flops"] = "" if pd.isna(r["flops"]) else int(r["flops"])
             row["epochs_run"] = float(runs[(runs["model"] == model) & (runs["task"] == task)]["epochs_run"].mean())
             row["stopped_by_budget"] = bool(runs[(runs["model"] == model) & (runs["task"] == task)]["stopped_by_budget"].any())
             row["train_samples_per_second"] = s["train_samples_per_second"]

@@ -1,0 +1,55 @@
+"""`denali export`: the TorchScript file predicts what the cell predicts, and
+says what it takes and gives."""
+
+import numpy as np
+import pytest
+import torch
+from conftest import REPO
+from test_train import _cell, data  # noqa: F401 (the fixture)
+
+from denali_pipe.cli import main
+from denali_pipe.evaluate import load_cell, predict
+from denali_pipe.export import load_export
+from denali_pipe.preprocess import CropWindow
+from denali_pipe.train import Hyper, run_cell
+
+CASES = [
+    ("cnn1d", "shape", "log_z", "denali_pipe.models:cnn1d"),
+    ("mlp", "location", "raw", "denali_pipe.models:mlp"),
+    ("cnn3d", "size", "log_z", "denali_pipe.models:cnn3d"),
+    ("transformer", "shape", "log_z", "denali_pipe.models:transformer"),
+    ("tof", "location", "raw", "examples.tof_matched_filter:tof_matched_filter"),
+]
+
+
+@pytest.mark.parametrize(("model", "task", "norm", "factory"), CASES, ids=[c[0] for c in CASES])
+def test_the_export_predicts_what_the_cell_predicts(tmp_path, data, monkeypatch, caplog, model, task, norm, factory):  # noqa: F811
+    monkeypatch.chdir(REPO)  # the example model is found from the workflow's folder
+    x, samples = data
+    result = run_cell(x, samples, _cell(task=task, model=model), Hyper(lr=3e-3, epochs=1, batch_size=64, norm=norm), 0.2, factory)
+    run = tmp_path / "run"
+    run.mkdir()
+    torch.save(result.state, run / "model.pt")
+    crop = tmp_path / "crop_3x3.json"
+    crop.write_text('{"crop_start": 104, "zone_starts": [[104, 104, 104], [104, 104, 104], [104, 104, 104]]}')
+    assert main(["export", str(run), str(tmp_path / "cell.pt"), "--crop", str(crop)]) == 0
+    module, meta = load_export(tmp_path / "cell.pt")
+    cell = load_cell(run)
+    # unseen inputs of another batch size than the trace's, counts of both signs as after background subtraction
+    probe = np.random.default_rng(5).normal(0, 40, (7, *cell.input_shape)).astype(np.float32)
+    with torch.no_grad():
+        exported = module(torch.from_numpy(probe)).numpy()
+    np.testing.assert_allclose(exported, predict(cell, probe), rtol=1e-4, atol=1e-4)
+    assert meta["task"] == task and meta["classes"] == cell.classes and meta["input_shape"] == list(cell.input_shape)
+    assert meta["normalisation"]["kind"] == norm and meta["factory"] == factory and meta["cell"]["model"] == model
+    assert CropWindow.from_dict(meta["crop"]).crop_start == 104
+    assert meta["outputs"] == (["x_m", "y_m"] if task == "location" else "logits over classes")
+
+
+def test_a_file_that_is_not_an_export_is_refused(tmp_path):
+    torch.jit.save(torch.jit.script(torch.nn.Identity()), str(tmp_path / "plain.pt"))
+    with pytest.raises(ValueError, match="plain.pt: a TorchScript file without denali-pipe's denali.json"):
+        load_export(tmp_path / "plain.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="junk.pt: not a denali-pipe export"):
+        load_export(tmp_path / "junk.pt")
