@@ -142,7 +142,7 @@ def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisan
     rig, seed = config["rig"], config["seed"]
     phot = Photometry.from_config(rig["photometry"])
     offset = gantry_offset(rig["nuisances"], seed, cs.name, k)
-    light = transport(cs.resolution, _scene(cs, spec, scene.tag1_pose(k), offset, nuisance))
+    light = transport(cs.resolution, _scene(cs, spec, scene.tag1_pose(k), offset, nuisance), phot)
     hist = np.stack(
         [
             sample_counts(
