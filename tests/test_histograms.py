@@ -260,3 +260,26 @@ def test_bump_width_is_the_objects_path_extent_not_the_pulse(phot, mid_scene):
     assert width("square", "8inch", phot) > 9
     assert width("square", "8inch", sharp) > 8  # a near-delta pulse leaves the width
     assert width("square", "4inch", phot) < width("square", "8inch", phot) - 2.5
+
+
+def test_8x8_subcaptures_tile_the_grid_on_sparse_lattices():
+    sub = geo.zone_subcapture("8x8").reshape(8, 8)
+    assert np.all(np.bincount(sub.ravel()) == 8)
+    # neighbours in a row or a column come from different subcaptures
+    assert np.all(sub[:, 1:] != sub[:, :-1]) and np.all(sub[1:] != sub[:-1])
+    # REFERENCE Part 6: subcapture 0 covers rows 1, 3, 5, 7 in columns 0 and 4
+    assert set(zip(*np.nonzero(sub == 0))) == {(r, c) for r in (1, 3, 5, 7) for c in (0, 4)}
+    assert np.all(geo.zone_subcapture("3x3") == 0)
+
+
+def test_each_subcapture_has_its_own_power_and_clock(phot):
+    scene = [mount_scatterer(geo.object_pose(50).t)]
+    sub = geo.zone_subcapture("8x8").reshape(8, 8)
+    base = H.expected_counts("8x8", False, scene, phot)
+    power = tuple(1.0 + 0.1 * (np.arange(8) == 3))
+    brighter = H.expected_counts("8x8", False, scene, phot, H.Conditions(power_gain=power))
+    changed = np.abs(brighter - base).max(-1) > 1e-9
+    assert np.array_equal(changed, sub == 3)
+    shift = tuple(2.0 * (np.arange(8) == 5))
+    later = H.expected_counts("8x8", False, scene, phot, H.Conditions(time_shift_bins=shift))
+    assert np.array_equal(np.argmax(later, -1) - np.argmax(base, -1) == 2, sub == 5)

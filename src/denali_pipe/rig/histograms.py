@@ -124,11 +124,13 @@ class Photometry:
 class Conditions:
     """Operating conditions of one capture (the campaign's nuisances,
     `rig.nuisances`): laser power and room light relative to nominal, and the
-    capture's clock offset in bins (positive = later)."""
+    clock offset in bins (positive = later). Power and clock offset are per
+    subcapture of the firmware (a tuple of one value each, `Firmware.subcaptures`),
+    or one value for all."""
 
-    power_gain: float = 1.0
+    power_gain: tuple[float, ...] | float = 1.0
     ambient_gain: float = 1.0
-    time_shift_bins: float = 0.0
+    time_shift_bins: tuple[float, ...] | float = 0.0
 
 
 @dataclass(frozen=True)
@@ -362,9 +364,15 @@ def counts_from_transport(resolution: str, light_on: bool, light: Transport, pho
     fw, ref = geo.FIRMWARE[resolution], geo.FIRMWARE[geo.REFERENCE_RESOLUTION]
     iters = fw.kilo_iterations / ref.kilo_iterations
     zone_size, room = _floor_shares(resolution, phot)
-    signal = _convolve(light.hist, pulse_kernel(phot, conditions.time_shift_bins))
+    # each subcapture is its own measurement: its own laser power and clock offset
+    sub = geo.zone_subcapture(resolution)
+    power = np.broadcast_to(conditions.power_gain, (fw.subcaptures,))
+    shift = np.broadcast_to(conditions.time_shift_bins, (fw.subcaptures,))
+    signal = np.empty_like(light.hist)
+    for s in range(fw.subcaptures):
+        signal[sub == s] = power[s] * _convolve(light.hist[sub == s], pulse_kernel(phot, float(shift[s])))
     floor = phot.dark_counts * zone_size + (phot.ambient_counts * conditions.ambient_gain * room * light.ambient if light_on else 0.0)
-    x = iters * (conditions.power_gain * _gain(phot) * signal + floor[:, None])
+    x = iters * (_gain(phot) * signal + floor[:, None])
     # a zone's SPADs (hence its dead-time budget) scale with its solid angle;
     # its combiner's events per cycle do not, only the firmware's cycles
     counts = respond(x, iters * phot.saturation_counts, iters * phot.dead_time_counts * zone_size[:, None])
