@@ -136,17 +136,13 @@ class Conditions:
 @dataclass(frozen=True)
 class Scatterer:
     """Hidden surface samples. points, normals (N, 3) world (normals face the
-    wall side); area (N,) m^2; albedos of the Lambertian and retroreflective
-    parts; the retroreflective part's falloff with entrance angle b,
-    cos(b)^retro_entrance_power relative to normal incidence
-    (`objects.Material`)."""
+    wall side); area (N,) m^2; albedos of the Lambertian and retroreflective parts."""
 
     points: np.ndarray
     normals: np.ndarray
     area: np.ndarray
     rho_diffuse: float
     rho_retro: float
-    retro_entrance_power: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -251,10 +247,7 @@ def transport(resolution: str, scatterers: list[Scatterer], phot: Photometry) ->
         blocked += (1.0 - sc.rho_diffuse) * g_oq.sum(0) / np.pi
         if sc.rho_retro > 0:
             radiance_in = (rho_w / np.pi) * e_q  # L(q -> o)
-            # the sheeting returns less at oblique entrance (its beads or
-            # prisms see a smaller effective aperture)
-            lobe = np.clip(cos_o, 0, None) ** sc.retro_entrance_power
-            w = sc.rho_retro * radiance_in[None, :] * g_oq * lobe * seen[None, :]
+            w = sc.rho_retro * radiance_in[None, :] * g_oq * seen[None, :]
             _splat(hist, np.broadcast_to(zone, w.shape).ravel(), (2 * r_q + 2 * dist).ravel(), w.ravel())
         if sc.rho_diffuse > 0:
             _add_diffuse(hist, zone, r_q, seen, g_oq, dist, sc, phot)
