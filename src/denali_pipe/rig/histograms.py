@@ -23,8 +23,8 @@ sensor-relative optical path length (OPL):
 Radiometry is relative: the laser is a point source whose intensity is 1 on
 its beam axis and falls off over the field as the VCSEL's emission profile
 (`Photometry.emission`); each ray a zone collects is weighted by the
-receiver's response (`Photometry.response`: the lens's relative illumination
-times the zone's SPAD-group response across its footprint). Every transport
+receiver's response (`Photometry.response`: the lens's relative
+illumination, the same for every zone's SPAD group). Every transport
 term is in the same (arbitrary) unit, and one gain, calibrated on the
 direct-return peak of the centre 3x3 zone, turns it into counts. Counts scale
 with the firmware's iterations and, for the floor, with each zone's SPADs
@@ -54,14 +54,14 @@ LASER_SAMPLES = 4
 
 @dataclass(frozen=True)
 class Photometry:
-    """Sensor response, stated for one 3x3 zone at the 3x3 firmware's
-    iterations (counts per bin unless noted; `config/config.yaml` gives the
-    basis of each value).
+    """Sensor response, counts stated for the centre 3x3 zone at the 3x3
+    firmware's iterations (counts per bin unless noted; `config/config.yaml`
+    gives the basis of each value).
 
     direct_peak_counts: the centre zone's direct-return peak above the floor
         before the response nonlinearity (the photon flux; sets the gain).
-    dark_counts, ambient_counts: the floor per bin, lights off and the extra
-        with lights on, before the nonlinearity.
+    dark_counts, ambient_counts: the centre zone's floor per bin, lights off
+        and the extra with lights on, before the nonlinearity.
     pulse_sigma_bins, pulse_tail_bins: Gaussian jitter and fast SPAD tail.
     slow_tail_bins, slow_tail_fraction: time constant and energy share of the
         slow tail (carrier diffusion, laser afterglow).
@@ -334,9 +334,8 @@ def _direct_peak(phot: Photometry) -> float:
 def _floor_shares(resolution: str, phot: Photometry) -> tuple[np.ndarray, np.ndarray]:
     """Each zone's floor relative to the centre 3x3 zone's, (Z,) twice: dark
     counts scale with the zone's SPADs (its solid angle, the lens mapping
-    solid angle onto the array), room light with its response-weighted
-    solid angle (vignetting and the SPAD group's response apply to it as to
-    the laser's return)."""
+    solid angle onto the array), room light with its vignetted solid angle
+    (the lens passes it as it passes the laser's return)."""
     ref, ws = wall_samples(geo.REFERENCE_RESOLUTION), wall_samples(resolution)
     centre = len(ref.zone_omega) // 2
     zone_size = ws.zone_omega / ref.zone_omega.mean()
