@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from denali_pipe.rig.measure import fwhm, measure
+from denali_pipe.rig.measure import fwhm, matched_filter_snr, measure
 
 
 def gaussian(b, centre, sigma, height):
@@ -29,3 +29,12 @@ def test_fwhm_of_a_box():
     x = np.zeros(20)
     x[8:12] = 1.0
     assert fwhm(x, 9) == pytest.approx(4.0)
+
+
+def test_matched_filter_snr_of_a_known_bump():
+    b = np.arange(128.0)
+    expected = np.full(128, 400.0)
+    signal = gaussian(b, 60, 2.0, 100.0)
+    # sum s^2 / 400 for a Gaussian of height h and sigma 2: h^2 sqrt(pi) 2 / 400
+    assert matched_filter_snr(signal, expected, 0.0) == pytest.approx(np.sqrt(100.0**2 * np.sqrt(np.pi) * 2 / 400), rel=1e-3)
+    assert matched_filter_snr(signal, expected, 20.0) == pytest.approx(matched_filter_snr(signal, expected, 0.0) / np.sqrt(2), rel=1e-3)

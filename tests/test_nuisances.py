@@ -29,8 +29,22 @@ def test_magnitudes_follow_the_config(cfg):
     offsets = np.array([N.gantry_offset(cfg, 7, "s", k) for k in range(100)])
     assert np.all(offsets[:, 2] == 0)  # the carriage rides on rails
     assert offsets[:, :2].std() == pytest.approx(cfg["gantry_repeatability_m"], rel=0.2)
-    shifts = [N.capture_conditions(cfg, 7, "s", k, r, sets[0]).time_shift_bins for k in range(50) for r in range(3)]
+    shifts = [N.capture_conditions(cfg, 7, "s", k, r, sets[0], 1).time_shift_bins for k in range(50) for r in range(3)]
     assert np.std(shifts) == pytest.approx(cfg["timing_drift_bins"], rel=0.2)
+
+
+def test_subcaptures_deviate_about_the_capture(cfg):
+    s = N.SetNuisance(tilt_deg=0.0, yaw_deg=0.0, power_gain=1.1, ambient_gain=1.0)
+    one = N.capture_conditions(cfg, 7, "s", 3, 0, s, 1)
+    assert one.power_gain == (1.1,)
+    caps = [N.capture_conditions(cfg, 7, "s", k, 0, s, 8) for k in range(100)]
+    shifts, powers = np.array([c.time_shift_bins for c in caps]), np.array([c.power_gain for c in caps])
+    assert shifts.shape == powers.shape == (100, 8)
+    # the capture's own drift is shared; the subcaptures scatter about it (sd x sqrt(7/8) about their mean)
+    assert shifts.mean(1).std() == pytest.approx(cfg["timing_drift_bins"], rel=0.2)
+    assert (shifts - shifts.mean(1, keepdims=True)).std() == pytest.approx(cfg["subcapture_timing_bins"] * np.sqrt(7 / 8), rel=0.1)
+    assert powers.mean(1) == pytest.approx(1.1)
+    assert (powers / 1.1 - 1).std() == pytest.approx(cfg["subcapture_power_drift"] * np.sqrt(7 / 8), rel=0.1)
 
 
 def test_mounting_turns_the_plate_about_its_mount_point():

@@ -161,7 +161,10 @@ def test_rig_vs_real_measures_the_centre_zone(tiny_run):
     rig = df[df.source == "capture source"]
     # tiny: circle (the first base shape) at both sizes, both lightings, beside three real figures
     assert sorted(rig.set) == sorted(f"circle_{size}_3x3_{light}" for size in ("4inch", "8inch") for light in ("lighton", "lightoff"))
-    assert df.source.str.startswith("real").sum() == 3
+    assert df.source.str.startswith("real (").sum() == 3
+    # every zone's mean counts beside REFERENCE Part 5's
+    zones = df[df.source == "capture source, every zone"]
+    assert len(zones) == 9 and zones.mean_counts.gt(0).all() and zones.real_mean_counts.notna().all()
     off = rig.set_index("set")
     big, small = off.loc["circle_8inch_3x3_lightoff"], off.loc["circle_4inch_3x3_lightoff"]
     assert 0.01 < big.floor_fraction < 0.1 and big.late_over_floor < 1

@@ -415,15 +415,45 @@ def wall_distance(points: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class Firmware:
     """Capture settings of one TMF8828 mode. Photons per zone scale with
-    `kilo_iterations` (laser pulses / 1000) and with the zone's solid angle."""
+    `kilo_iterations` (laser pulses / 1000, run by every subcapture) and
+    with the zone's solid angle. `subcaptures`: the sequential measurements
+    one capture is read out as, each with its own channels (zones)."""
 
     spad_map: int
     period_ms: int
     kilo_iterations: int
+    subcaptures: int
 
 
 FIRMWARE = {
-    "3x3": Firmware(spad_map=6, period_ms=16, kilo_iterations=10_000),
-    "8x8": Firmware(spad_map=15, period_ms=132, kilo_iterations=10),
+    "3x3": Firmware(spad_map=6, period_ms=16, kilo_iterations=10_000, subcaptures=1),
+    "8x8": Firmware(spad_map=15, period_ms=132, kilo_iterations=10, subcaptures=8),
 }
 REFERENCE_RESOLUTION = "3x3"  # photometric parameters are stated for a 3x3 zone
+
+# The release's capture driver places the 8x8 mode's 64 histograms on the
+# grid by a fixed map: subcapture s's channel c (0-based) is pixel
+# MAP_8X8[s][c] (1-based, row-major: row = (p - 1) // 8, column = (p - 1) % 8).
+# Each subcapture covers every other row in two columns four apart, so
+# neighbouring zones come from different, sequential subcaptures.
+MAP_8X8 = (
+    (57, 61, 41, 45, 25, 29, 9, 13),
+    (58, 62, 42, 46, 26, 30, 10, 14),
+    (59, 63, 43, 47, 27, 31, 11, 15),
+    (60, 64, 44, 48, 28, 32, 12, 16),
+    (49, 53, 33, 37, 17, 21, 1, 5),
+    (50, 54, 34, 38, 18, 22, 2, 6),
+    (51, 55, 35, 39, 19, 23, 3, 7),
+    (52, 56, 36, 40, 20, 24, 4, 8),
+)
+
+
+def zone_subcapture(resolution: str) -> np.ndarray:
+    """(n * n,) int: the subcapture that measures each zone (row-major)."""
+    n = RESOLUTIONS[resolution]
+    if FIRMWARE[resolution].subcaptures == 1:
+        return np.zeros(n * n, int)
+    sub = np.empty(n * n, int)
+    for s, pixels in enumerate(MAP_8X8):
+        sub[np.asarray(pixels) - 1] = s
+    return sub

@@ -55,10 +55,21 @@ class Material:
     rho_retro: float
 
 
+# Reflectances at the TMF8828's 940 nm. The non-retroreflective plates are
+# Lambertian with the diffuse reflectance their material has in the near
+# infrared, where it differs from what the eye sees:
+# - cardstock: cellulose paper stock scatters strongly and its dyes are
+#   mostly transparent beyond ~800 nm; paper spectra in the USGS and
+#   ECOSTRESS spectral libraries lie at 0.7-0.85 around 940 nm: 0.75;
+# - white (white plastic sheet): TiO2-pigmented polymers (PVC, ABS, HIPS)
+#   reflect 0.8-0.9 diffusely in the near infrared: 0.85;
+# - manila (manila folder stock): unbleached, buff fibres, whose yellow
+#   absorbs in the blue only; ~0.7 at 940 nm, a little below white paper.
 MATERIALS = {
     "retroreflective": Material(rho_diffuse=0.15, rho_retro=0.6),
-    "cardstock": Material(rho_diffuse=0.45, rho_retro=0.0),
+    "cardstock": Material(rho_diffuse=0.75, rho_retro=0.0),
     "white": Material(rho_diffuse=0.85, rho_retro=0.0),
+    "manila": Material(rho_diffuse=0.7, rho_retro=0.0),
 }
 
 _REPO_CONFIG = Path(__file__).resolve().parents[2] / "config"

@@ -1,13 +1,19 @@
-"""`results/rig_vs_real.png` + CSV: the capture source's raw centre-zone
-histograms beside the numbers read off the release's figures of real 3x3
-captures (REFERENCE Part 4, `paper.REAL_CENTRE_ZONE`).
+"""`results/rig_vs_real.png` + CSV: the capture source's raw 3x3 histograms
+beside what is known of real ones: the centre zone's shape read off the
+release's figures (REFERENCE Part 4, `paper.REAL_CENTRE_ZONE`) and every
+zone's mean counts recovered from the release's trained models (Part 5,
+`paper.REAL_ZONE_MEANS`).
 
 For one object at 8 in and 4 in, each lighting, at the captured gantry
 location nearest the grid's centre: one capture (repeat 0, as the figures
 show single captures) and the mean of the `NOOBJECT` background at the same
 location, measured by `rig.measure` (floor before and after the direct
 return, direct peak, bump excess, FWHM). Each panel is zoomed, as the
-release's figures are, to the lower part of the direct peak.
+release's figures are, to the lower part of the direct peak. Below them,
+each zone's mean counts per bin over every capture of those object sets
+(all locations, repeats and bins) beside Part 5's, with the centre/edge and
+centre/corner ratios, the right/left column ratio and the pooled spread of
+log1p(counts).
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ import pandas as pd
 from denali_pipe import geometry as geo
 from denali_pipe.io.store import open_set
 from denali_pipe.report.figure import plt, save_figure
-from denali_pipe.report.paper import REAL_CENTRE_ZONE
+from denali_pipe.report.paper import REAL_CENTRE_ZONE, REAL_ZONE_MEANS
 from denali_pipe.rig.measure import measure
 
 CENTRE_ZONE = (1, 1)
@@ -40,7 +46,16 @@ COLUMNS = (
     "bump_over_floor",
     "bump_bin",
     "bump_fwhm",
+    "zone_row",
+    "zone_col",
+    "mean_counts",
+    "real_mean_counts",
 )
+# Source labels of the per-zone rows.
+ZONE_SOURCE = "capture source, every zone"
+REAL_ZONE_SOURCE = "real, every zone (release's models)"
+# The real captures' pooled spread of log1p(counts) (REFERENCE Part 2).
+REAL_LOG_SPREAD = 0.78
 
 
 def mid_location(locations: list[int]) -> int:
@@ -67,6 +82,58 @@ def real_rows() -> list[dict]:
     return [{"source": f"real ({name})", **values} for name, values in REAL_CENTRE_ZONE.items()]
 
 
+def zone_pattern(means: np.ndarray) -> dict:
+    """Centre/edge and centre/corner ratios and the right/left column ratio of (3, 3) zone means."""
+    edge = means[[0, 1, 1, 2], [1, 0, 2, 1]].mean()
+    corner = means[[0, 0, 2, 2], [0, 2, 0, 2]].mean()
+    return {"centre/edge": means[1, 1] / edge, "centre/corner": means[1, 1] / corner, "column 2/column 0": means[:, 2].sum() / means[:, 0].sum()}
+
+
+def zone_means(paths: list[Path]) -> tuple[np.ndarray, float]:
+    """Mean counts per bin of every zone (3, 3) over every capture of the
+    stores at `paths` (locations, repeats, bins), and the pooled standard
+    deviation of log1p(counts) over them."""
+    total, n, logs, logs2 = 0.0, 0, 0.0, 0.0
+    for path in paths:
+        for _, h in open_set(path).iter_histograms():
+            h = h.astype(float)
+            total, n = total + h.sum(axis=(0, -1)), n + h.shape[0] * h.shape[-1]
+            lg = np.log1p(h)
+            logs, logs2 = logs + lg.sum(), logs2 + (lg**2).sum()
+    size = n * 9
+    return total / n, float(np.sqrt(logs2 / size - (logs / size) ** 2))
+
+
+def zone_rows(means: np.ndarray) -> list[dict]:
+    """The rig's zone means beside the real ones, then the real ones as their own rows."""
+    real = np.asarray(REAL_ZONE_MEANS)
+    zones = [(r, c) for r in range(3) for c in range(3)]
+    rig = [{"source": ZONE_SOURCE, "zone_row": r, "zone_col": c, "mean_counts": means[r, c], "real_mean_counts": real[r, c]} for r, c in zones]
+    return rig + [{"source": REAL_ZONE_SOURCE, "zone_row": r, "zone_col": c, "mean_counts": real[r, c]} for r, c in zones]
+
+
+def plot_zones(ax, means: np.ndarray, spread: float) -> None:
+    """Grouped bars of each zone's mean counts, the rig's beside the real ones."""
+    real = np.asarray(REAL_ZONE_MEANS)
+    x = np.arange(9)
+    ax.bar(x - 0.2, means.ravel(), width=0.4, color="tab:blue", label="capture source")
+    ax.bar(x + 0.2, real.ravel(), width=0.4, color="k", alpha=0.7, label="real (REFERENCE Part 5)")
+    for i, (m, rv) in enumerate(zip(means.ravel(), real.ravel())):
+        ax.text(i - 0.2, m, f"{100 * (m / rv - 1):+.0f} %", ha="center", va="bottom", fontsize=7, color="tab:blue")
+    ax.set_xticks(x, [f"({r}, {c})" for r in range(3) for c in range(3)])
+    ax.set_xlabel("zone (row, column) as stored; (1, 1) is the centre")
+    ax.set_ylabel("mean counts per bin")
+    ax.set_xlim(-0.6, 8.6)
+    ax.set_ylim(0, 1.15 * max(means.max(), real.max()))
+    rig, ref = zone_pattern(means), zone_pattern(real)
+    words = "; ".join(f"{k} {rig[k]:.2f} (real {ref[k]:.2f})" for k in rig)
+    ax.set_title(
+        f"Every zone's mean counts per bin over the object sets' captures (percentages: capture source against real)\n{words}; pooled log1p(counts) sd {spread:.2f} (real {REAL_LOG_SPREAD})",
+        fontsize=8,
+    )
+    ax.legend(fontsize=7, loc="upper right")
+
+
 def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path) -> pd.DataFrame:
     """Measure each (object set store, NOOBJECT store) pair's centre zone and
     plot it; write the PNG and the CSV (rig rows, then the real figures' rows)."""
@@ -82,11 +149,15 @@ def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path) ->
         m = measure(capture, background)
         rows.append({"source": "capture source", "set": obj.capture_set.name, "location": k, **m.to_dict()})
         panels.append((obj.capture_set, k, capture, background, m))
-    table = pd.DataFrame(rows + real_rows()).reindex(columns=list(COLUMNS))
+    means, spread = zone_means([obj_path for obj_path, _ in pairs])
+    table = pd.DataFrame(rows + real_rows() + zone_rows(means)).reindex(columns=list(COLUMNS))
 
     ncols = min(2, len(panels))
     nrows = -(-len(panels) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(5.2 * ncols, 3.6 * nrows + 0.6), squeeze=False)
+    fig = plt.figure(figsize=(max(5.2 * ncols, 9.0), 3.6 * nrows + 3.6))
+    grid = fig.add_gridspec(nrows + 1, ncols, height_ratios=[1.0] * nrows + [0.95])
+    axes = np.array([[fig.add_subplot(grid[r, c]) for c in range(ncols)] for r in range(nrows)])
+    plot_zones(fig.add_subplot(grid[nrows, :]), means, spread)
     bins = np.arange(geo.N_BINS)
     for ax in axes.flat[len(panels) :]:
         ax.set_visible(False)

@@ -116,13 +116,16 @@ def truth_record(cs: CaptureSet, spec: ObjectSpec | None, locations: np.ndarray,
 
 def _location_truth(cs: CaptureSet, k: int, nuisance: SetNuisance, config: dict, scene: TrackedScene) -> dict:
     nuisances, seed = config["rig"]["nuisances"], config["seed"]
+    subcaptures = geo.FIRMWARE[cs.resolution].subcaptures
     offset = gantry_offset(nuisances, seed, cs.name, k)
     obj = nuisance.object_pose(scene.tag1_pose(k), offset)
     return {
         "tag1": frame_tags(k, "tracking", tuple(offset), scene)[geo.OBJECT_TAG_ID].to_dict(),
         "object": obj.to_dict(),
         "gantry_offset_m": offset.tolist(),
-        "time_shift_bins": [capture_conditions(nuisances, seed, cs.name, k, r, nuisance).time_shift_bins for r in range(config["rig"]["repeats"])],
+        "time_shift_bins": [
+            list(capture_conditions(nuisances, seed, cs.name, k, r, nuisance, subcaptures).time_shift_bins) for r in range(config["rig"]["repeats"])
+        ],
         "wall_distance_m": float(geo.wall_distance(obj.t)),
     }
 
@@ -142,11 +145,17 @@ def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisan
     rig, seed = config["rig"], config["seed"]
     phot = Photometry.from_config(rig["photometry"])
     offset = gantry_offset(rig["nuisances"], seed, cs.name, k)
-    light = transport(cs.resolution, _scene(cs, spec, scene.tag1_pose(k), offset, nuisance))
+    light = transport(cs.resolution, _scene(cs, spec, scene.tag1_pose(k), offset, nuisance), phot)
     hist = np.stack(
         [
             sample_counts(
-                counts_from_transport(cs.resolution, cs.light_on, light, phot, capture_conditions(rig["nuisances"], seed, cs.name, k, r, nuisance)),
+                counts_from_transport(
+                    cs.resolution,
+                    cs.light_on,
+                    light,
+                    phot,
+                    capture_conditions(rig["nuisances"], seed, cs.name, k, r, nuisance, geo.FIRMWARE[cs.resolution].subcaptures),
+                ),
                 phot,
                 rng_for(seed, cs.name, k, r),
             )

@@ -20,11 +20,16 @@ sensor-relative optical path length (OPL):
   combiner, which flattens the direct peak; Poisson shot noise and Gaussian
   read noise.
 
-Radiometry is relative: the laser is a point source of unit intensity over the
-field of view, so every transport term is in the same (arbitrary) unit, and one
-gain, calibrated on the direct-return peak of the centre 3x3 zone, turns it
-into counts. Counts scale with the firmware's iterations and, for the floor,
-with each zone's solid angle, so 8x8 zones carry far fewer photons.
+Radiometry is relative: the laser is a point source whose intensity is 1 on
+its beam axis and falls off over the field as the VCSEL's emission profile
+(`Photometry.emission`); each ray a zone collects is weighted by the
+receiver's response (`Photometry.response`: the lens's relative
+illumination, the same for every zone's SPAD group). Every transport
+term is in the same (arbitrary) unit, and one gain, calibrated on the
+direct-return peak of the centre 3x3 zone, turns it into counts. Counts scale
+with the firmware's iterations and, for the floor, with each zone's SPADs
+(dark counts) or its response-weighted solid angle (room light), so 8x8
+zones carry far fewer photons.
 Nothing here knows object labels: signal depends on shape, size, material and
 location only through the scatterer points handed in.
 """
@@ -40,7 +45,7 @@ from scipy.special import log_ndtr, ndtr
 from denali_pipe import geometry as geo
 
 # Wall sub-samples per zone side: enough that the OPL spread inside one sample
-# cell stays well below the pulse width (~6 bins).
+# cell stays well below the pulse width (~4.6 bins FWHM).
 WALL_SAMPLES_PER_ZONE = {3: 4, 8: 2}
 # Laser-spot samples over the whole field of view for the diffuse three-bounce
 # term (smooth in p, so a coarse grid suffices).
@@ -49,14 +54,14 @@ LASER_SAMPLES = 4
 
 @dataclass(frozen=True)
 class Photometry:
-    """Sensor response, stated for one 3x3 zone at the 3x3 firmware's
-    iterations (counts per bin unless noted; `config/config.yaml` gives the
-    basis of each value).
+    """Sensor response, counts stated for the centre 3x3 zone at the 3x3
+    firmware's iterations (counts per bin unless noted; `config/config.yaml`
+    gives the basis of each value).
 
     direct_peak_counts: the centre zone's direct-return peak above the floor
         before the response nonlinearity (the photon flux; sets the gain).
-    dark_counts, ambient_counts: the floor per bin, lights off and the extra
-        with lights on, before the nonlinearity.
+    dark_counts, ambient_counts: the centre zone's floor per bin, lights off
+        and the extra with lights on, before the nonlinearity.
     pulse_sigma_bins, pulse_tail_bins: Gaussian jitter and fast SPAD tail.
     slow_tail_bins, slow_tail_fraction: time constant and energy share of the
         slow tail (carrier diffusion, laser afterglow).
@@ -66,6 +71,14 @@ class Photometry:
         their photons (its SPADs fire once per laser cycle: SPADs per zone
         x cycles, in the firmware's count units).
     read_noise_counts: Gaussian read noise on top of Poisson shot noise.
+    beam_hwhm_deg, beam_order: the VCSEL's emission profile, an elliptical
+        super-Gaussian 2^-(((ax / hx)^2 + (ay / hy)^2)^order) of the angles
+        ax (horizontal) and ay (vertical) from its axis: half widths at half
+        maximum (hx, hy) in degrees, and order (1 = Gaussian).
+    beam_yaw_deg, beam_pitch_deg: the beam axis's pointing offset from the
+        receiver's optical axis, degrees toward the sensor's right and up.
+    vignetting_power: the receive lens's relative illumination cos^n of the
+        field angle (n = 4: natural vignetting of a thin lens).
     """
 
     direct_peak_counts: float
@@ -78,21 +91,46 @@ class Photometry:
     saturation_counts: float
     dead_time_counts: float
     read_noise_counts: float
+    beam_hwhm_deg: tuple[float, float]
+    beam_order: float
+    beam_yaw_deg: float
+    beam_pitch_deg: float
+    vignetting_power: float
 
     @classmethod
     def from_config(cls, d: dict) -> "Photometry":
-        return cls(**{k: float(d[k]) for k in cls.__dataclass_fields__})
+        return cls(**{k: tuple(map(float, d[k])) if isinstance(d[k], list) else float(d[k]) for k in cls.__dataclass_fields__})
+
+    def emission(self, d_cam: np.ndarray) -> np.ndarray:
+        """Relative VCSEL intensity (...,) toward unit directions d_cam
+        (..., 3) in the sensor's camera frame (x right, y down, z forward);
+        1 on the beam axis. The profile is elliptical: its angles from the
+        axis across (horizontal) and along (vertical) are scaled by their
+        own half widths."""
+        d = d_cam @ (geo.rot_y(self.beam_yaw_deg) @ geo.rot_x(self.beam_pitch_deg))  # into the beam's frame
+        ax = np.arctan2(d[..., 0], d[..., 2]) / np.deg2rad(self.beam_hwhm_deg[0])
+        ay = np.arctan2(d[..., 1], d[..., 2]) / np.deg2rad(self.beam_hwhm_deg[1])
+        return np.exp2(-((ax**2 + ay**2) ** self.beam_order))
+
+    def response(self, d_cam: np.ndarray) -> np.ndarray:
+        """Relative receive response (...,) to rays along d_cam (..., 3,
+        camera frame): the lens's relative illumination, 1 on its axis.
+        Every zone of a SPAD map has the same SPAD group behind the lens, so
+        this is each zone's angular response across its footprint too."""
+        return d_cam[..., 2] ** self.vignetting_power
 
 
 @dataclass(frozen=True)
 class Conditions:
     """Operating conditions of one capture (the campaign's nuisances,
     `rig.nuisances`): laser power and room light relative to nominal, and the
-    capture's clock offset in bins (positive = later)."""
+    clock offset in bins (positive = later). Power and clock offset are per
+    subcapture of the firmware (a tuple of one value each, `Firmware.subcaptures`),
+    or one value for all."""
 
-    power_gain: float = 1.0
+    power_gain: tuple[float, ...] | float = 1.0
     ambient_gain: float = 1.0
-    time_shift_bins: float = 0.0
+    time_shift_bins: tuple[float, ...] | float = 0.0
 
 
 @dataclass(frozen=True)
@@ -114,7 +152,8 @@ class WallSamples:
     q: np.ndarray  # (Z, S, 3) wall points
     r: np.ndarray  # (Z, S) sensor -> q distance, m
     omega: np.ndarray  # (Z, S) solid angle of the sample's ray cell, sr
-    irradiance: np.ndarray  # (Z, S) laser irradiance at q for unit intensity, 1/m^2
+    spread: np.ndarray  # (Z, S) cos(incidence at q) / r^2: irradiance at q per unit laser intensity, 1/m^2
+    d_cam: np.ndarray  # (Z, S, 3) unit ray directions in the sensor's camera frame
     zone_omega: np.ndarray  # (Z,) solid angle of each zone, sr
 
 
@@ -125,7 +164,8 @@ def _wall_samples(n: int, s: int) -> WallSamples:
     q = geo.intersect_plane(geo.SENSOR_POSITION, dirs, geo.WALL)
     r = np.linalg.norm(q - geo.SENSOR_POSITION, axis=-1)
     cos_q = -(dirs @ geo.WALL.normal)
-    return WallSamples(q, r, omega, cos_q / r**2, omega.sum(1))
+    R, _ = geo.look_at(geo.SENSOR_POSITION, geo.SENSOR_FORWARD)
+    return WallSamples(q, r, omega, cos_q / r**2, dirs @ R.T, omega.sum(1))
 
 
 @lru_cache(maxsize=None)
@@ -138,6 +178,16 @@ def wall_samples(resolution: str) -> WallSamples:
 def laser_samples() -> WallSamples:
     """The flood-lit wall as one coarse grid (a single 'zone')."""
     return _wall_samples(1, LASER_SAMPLES)
+
+
+def irradiance(ws: WallSamples, phot: Photometry) -> np.ndarray:
+    """(Z, S) laser irradiance at each wall sample, relative (1/m^2 at unit on-axis intensity)."""
+    return phot.emission(ws.d_cam) * ws.spread
+
+
+def collected(ws: WallSamples, phot: Photometry) -> np.ndarray:
+    """(Z, S) each sample's solid angle weighted by the zone's receive response, sr."""
+    return ws.omega * phot.response(ws.d_cam)
 
 
 def _splat(hist: np.ndarray, zone: np.ndarray, opl: np.ndarray, weight: np.ndarray) -> None:
@@ -166,8 +216,9 @@ class Transport:
     ambient: np.ndarray
 
 
-def transport(resolution: str, scatterers: list[Scatterer]) -> Transport:
-    """The scene's light transport: laser returns and room-light occlusion."""
+def transport(resolution: str, scatterers: list[Scatterer], phot: Photometry) -> Transport:
+    """The scene's light transport: laser returns and room-light occlusion,
+    under `phot`'s emission profile and receive response."""
     ws = wall_samples(resolution)
     nz, ns = ws.r.shape
     rho_w = geo.WALL_ALBEDO
@@ -175,9 +226,11 @@ def transport(resolution: str, scatterers: list[Scatterer]) -> Transport:
     blocked = np.zeros(nz * ns)
     zone = np.repeat(np.arange(nz), ns)
     q, r_q = ws.q.reshape(-1, 3), ws.r.reshape(-1)
-    # radiance of q toward the sensor per unit irradiance, times the ray cell's solid angle
-    seen = (rho_w / np.pi) * ws.omega.reshape(-1)
-    _splat(hist, zone, 2 * r_q, seen * ws.irradiance.reshape(-1))
+    e_q = irradiance(ws, phot).reshape(-1)
+    collect = collected(ws, phot)
+    # radiance of q toward the sensor per unit irradiance, times the ray's weighted solid angle
+    seen = (rho_w / np.pi) * collect.reshape(-1)
+    _splat(hist, zone, 2 * r_q, seen * e_q)
 
     nw = geo.WALL.normal
     for sc in scatterers:
@@ -193,17 +246,16 @@ def transport(resolution: str, scatterers: list[Scatterer]) -> Transport:
         # to the lamps, not to the wall)
         blocked += (1.0 - sc.rho_diffuse) * g_oq.sum(0) / np.pi
         if sc.rho_retro > 0:
-            radiance_in = (rho_w / np.pi) * ws.irradiance.reshape(-1)  # L(q -> o)
+            radiance_in = (rho_w / np.pi) * e_q  # L(q -> o)
             w = sc.rho_retro * radiance_in[None, :] * g_oq * seen[None, :]
             _splat(hist, np.broadcast_to(zone, w.shape).ravel(), (2 * r_q + 2 * dist).ravel(), w.ravel())
         if sc.rho_diffuse > 0:
-            _add_diffuse(hist, zone, r_q, seen, g_oq, dist, sc)
-    omega = ws.omega.reshape(nz, ns)
-    ambient = (omega * (1.0 - np.clip(blocked.reshape(nz, ns), 0.0, 1.0))).sum(1) / omega.sum(1)
+            _add_diffuse(hist, zone, r_q, seen, g_oq, dist, sc, phot)
+    ambient = (collect * (1.0 - np.clip(blocked.reshape(nz, ns), 0.0, 1.0))).sum(1) / collect.sum(1)
     return Transport(hist, ambient)
 
 
-def _add_diffuse(hist, zone, r_q, seen, g_oq, d_oq, sc: Scatterer) -> None:
+def _add_diffuse(hist, zone, r_q, seen, g_oq, d_oq, sc: Scatterer, phot: Photometry) -> None:
     """Lambertian scatterer lit by the whole flood-lit wall: sum over laser spots p."""
     ls = laser_samples()
     p, r_p = ls.q.reshape(-1, 3), ls.r.reshape(-1)
@@ -212,7 +264,8 @@ def _add_diffuse(hist, zone, r_q, seen, g_oq, d_oq, sc: Scatterer) -> None:
     cos_p = (d_po @ geo.WALL.normal) / dist_po
     cos_o = -np.einsum("pok,ok->po", d_po, sc.normals) / dist_po
     # L(p -> o) cos_p a_p / |p - o|^2 with a_p = omega_p r_p^2 / cos_p, L = rho_w/pi E_L(p)
-    e_o = (geo.WALL_ALBEDO / np.pi) * ls.omega.reshape(-1)[:, None] * np.clip(cos_p, 0, None)
+    # and E_L(p) = I(p) cos_p / r_p^2: the spot's share of the beam is I(p) omega_p
+    e_o = (geo.WALL_ALBEDO / np.pi) * (phot.emission(ls.d_cam) * ls.omega).reshape(-1)[:, None] * np.clip(cos_p, 0, None)
     e_o = e_o * np.clip(cos_o, 0, None) / dist_po**2  # (P, O) irradiance at o from each p
     radiance_o = (sc.rho_diffuse / np.pi) * e_o
     w_oq = g_oq * seen[None, :]  # (O, Q)
@@ -273,13 +326,26 @@ def _gain(phot: Photometry) -> float:
 
 @lru_cache(maxsize=None)
 def _direct_peak(phot: Photometry) -> float:
-    h = _convolve(transport(geo.REFERENCE_RESOLUTION, []).hist, pulse_kernel(phot))
+    h = _convolve(transport(geo.REFERENCE_RESOLUTION, [], phot).hist, pulse_kernel(phot))
     return float(h[len(h) // 2].max())
+
+
+@lru_cache(maxsize=None)
+def _floor_shares(resolution: str, phot: Photometry) -> tuple[np.ndarray, np.ndarray]:
+    """Each zone's floor relative to the centre 3x3 zone's, (Z,) twice: dark
+    counts scale with the zone's SPADs (its solid angle, the lens mapping
+    solid angle onto the array), room light with its vignetted solid angle
+    (the lens passes it as it passes the laser's return)."""
+    ref, ws = wall_samples(geo.REFERENCE_RESOLUTION), wall_samples(resolution)
+    centre = len(ref.zone_omega) // 2
+    zone_size = ws.zone_omega / ref.zone_omega.mean()
+    room = collected(ws, phot).sum(1) / collected(ref, phot)[centre].sum()
+    return zone_size, room
 
 
 def expected_counts(resolution: str, light_on: bool, scatterers: list[Scatterer], phot: Photometry, conditions: Conditions = Conditions()) -> np.ndarray:
     """Expected counts (n, n, N_BINS) float64, before noise."""
-    return counts_from_transport(resolution, light_on, transport(resolution, scatterers), phot, conditions)
+    return counts_from_transport(resolution, light_on, transport(resolution, scatterers, phot), phot, conditions)
 
 
 def counts_from_transport(resolution: str, light_on: bool, light: Transport, phot: Photometry, conditions: Conditions = Conditions()) -> np.ndarray:
@@ -289,11 +355,16 @@ def counts_from_transport(resolution: str, light_on: bool, light: Transport, pho
     n = geo.RESOLUTIONS[resolution]
     fw, ref = geo.FIRMWARE[resolution], geo.FIRMWARE[geo.REFERENCE_RESOLUTION]
     iters = fw.kilo_iterations / ref.kilo_iterations
-    ref_zone = wall_samples(geo.REFERENCE_RESOLUTION).zone_omega.mean()
-    zone_size = wall_samples(resolution).zone_omega / ref_zone
-    signal = _convolve(light.hist, pulse_kernel(phot, conditions.time_shift_bins))
-    floor = phot.dark_counts + (phot.ambient_counts * conditions.ambient_gain * light.ambient if light_on else 0.0)
-    x = iters * (conditions.power_gain * _gain(phot) * signal + (floor * zone_size)[:, None])
+    zone_size, room = _floor_shares(resolution, phot)
+    # each subcapture is its own measurement: its own laser power and clock offset
+    sub = geo.zone_subcapture(resolution)
+    power = np.broadcast_to(conditions.power_gain, (fw.subcaptures,))
+    shift = np.broadcast_to(conditions.time_shift_bins, (fw.subcaptures,))
+    signal = np.empty_like(light.hist)
+    for s in range(fw.subcaptures):
+        signal[sub == s] = power[s] * _convolve(light.hist[sub == s], pulse_kernel(phot, float(shift[s])))
+    floor = phot.dark_counts * zone_size + (phot.ambient_counts * conditions.ambient_gain * room * light.ambient if light_on else 0.0)
+    x = iters * (_gain(phot) * signal + floor[:, None])
     # a zone's SPADs (hence its dead-time budget) scale with its solid angle;
     # its combiner's events per cycle do not, only the firmware's cycles
     counts = respond(x, iters * phot.saturation_counts, iters * phot.dead_time_counts * zone_size[:, None])

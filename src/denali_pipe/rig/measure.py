@@ -100,3 +100,11 @@ def measure(capture: np.ndarray, background: np.ndarray) -> CentreZone:
         bump_bin=bump_bin,
         bump_fwhm=fwhm(excess, bump_bin) if bump > 0 else float("nan"),
     )
+
+
+def matched_filter_snr(signal: np.ndarray, expected: np.ndarray, read_noise: float) -> np.ndarray:
+    """SNR (...,) of a known signal (..., N_BINS) in one capture whose
+    expected counts are `expected` (same shape): the matched filter's
+    sqrt(sum_b s_b^2 / var_b), with var_b the Poisson variance plus read
+    noise squared (counts^2)."""
+    return np.sqrt((np.asarray(signal, float) ** 2 / (np.asarray(expected, float) + read_noise**2)).sum(-1))

@@ -23,6 +23,15 @@ reproduces it, and `rig_truth.json` records every value drawn.
 - Per capture (repeat): timing drift, sd 0.15 bins (12 ps): the laser
   driver's and TDC's delay drift with temperature between captures, left
   after the sensor's on-chip reference-SPAD correction.
+- Per subcapture of a capture (the 8x8 mode's 8 sequential measurements,
+  REFERENCE Part 6), about the capture's values:
+  - clock offset, sd 0.1 bins (8 ps): each subcapture is referenced to its
+    own reference-SPAD histogram, whose peak is located only as well as its
+    counts allow; at 8x8's 10 kilo-iterations per subcapture a ~4-bin wide
+    reference peak of a few hundred counts places its centroid to ~0.1 bins;
+  - laser power, sd 0.5 %: the VCSEL's output falls ~0.3-0.5 %/K and its die
+    warms by about a kelvin over the sequence of pulse trains.
+  With one subcapture (3x3) both deviations are zero.
 """
 
 from __future__ import annotations
@@ -79,7 +88,17 @@ def gantry_offset(nuisances: dict, seed: int, set_name: str, location: int) -> n
     return nuisances["gantry_repeatability_m"] * np.array([dx, dy, 0.0])
 
 
-def capture_conditions(nuisances: dict, seed: int, set_name: str, location: int, repeat: int, s: SetNuisance) -> Conditions:
-    """One capture's operating conditions: the set's power and room light, and its own clock offset."""
-    shift = nuisances["timing_drift_bins"] * rng_for(seed, set_name, location, repeat, "clock").standard_normal()
-    return Conditions(power_gain=s.power_gain, ambient_gain=s.ambient_gain, time_shift_bins=float(shift))
+def capture_conditions(nuisances: dict, seed: int, set_name: str, location: int, repeat: int, s: SetNuisance, subcaptures: int) -> Conditions:
+    """One capture's operating conditions: the set's power and room light,
+    its own clock offset, and each of its `subcaptures` sequential
+    measurements' deviations in laser power and clock offset about the
+    capture's (none with one subcapture)."""
+    rng = rng_for(seed, set_name, location, repeat, "clock")
+    shift = nuisances["timing_drift_bins"] * rng.standard_normal()
+    dev_power, dev_shift = rng.standard_normal((2, subcaptures))
+    dev_power, dev_shift = dev_power - dev_power.mean(), dev_shift - dev_shift.mean()
+    return Conditions(
+        power_gain=tuple(s.power_gain * (1.0 + nuisances["subcapture_power_drift"] * dev_power)),
+        ambient_gain=s.ambient_gain,
+        time_shift_bins=tuple(shift + nuisances["subcapture_timing_bins"] * dev_shift),
+    )
