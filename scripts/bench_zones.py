@@ -7,7 +7,7 @@ asserts nothing.
 
 Expected counts (no nuisances) over 5 gantry locations x 3 objects (A,
 square, 1) x 2 sizes x 2 lightings: every zone's mean counts per bin beside
-REFERENCE Part 5's, the centre/edge, centre/corner and right/left ratios, the
+the real sensor's (docs/rig_zones.md), the centre/edge, centre/corner and right/left ratios, the
 pooled log1p(counts) mean and spread of one noisy draw each (real 7.1, 0.78),
 and Part 4's centre-zone checks on the 8 in square at location 45, lights
 off: (b) floor / direct peak and late / pre-peak floor on the background,

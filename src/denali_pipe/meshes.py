@@ -2,7 +2,7 @@
 release's files) and quadrature samples on the wall-facing face.
 
 Frame and units as in `objects`: local metres, +z away from the wall, areas
-m^2. Conventions shared with the real release's meshes (REFERENCE.md,
+m^2. Conventions shared with the real release's meshes (docs/deviations.md,
 section 2): largest dimension SIZES[size], centred in x, bottom edge at
 y = BOTTOM_Y, glyphs mirrored in x so that they read correctly from the
 wall. Where the release's meshes break these rules (off-centre A/minus, an

@@ -1,4 +1,4 @@
-"""Test metrics exactly as the reference computes them (REFERENCE Part 2 §4), in numpy.
+"""Test metrics exactly as the reference computes them (docs/deviations.md), in numpy.
 
 Regression (location): d = prediction - target, (N, 2) in metres (x, y).
 - mse = mean(d^2) over all N*2 entries; rmse = sqrt(mse) is a per-coordinate RMSE,

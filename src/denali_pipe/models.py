@@ -1,4 +1,4 @@
-"""The four benchmark models of the DENALI paper (supplement §11.2, REFERENCE Part 2 §2),
+"""The four benchmark models of the DENALI paper (supplement §11.2, docs/deviations.md),
 and their factories: entries of the model registry like any user model
 (`registry`, config `train.models`).
 

@@ -38,7 +38,7 @@ import numpy as np
 # shot noise, whose variance is its counts. A zone's return has ended where
 # its excess over the floor is at most the floor itself, i.e. the noise there
 # is within sqrt(2) of the floor's. The slow tail of the real pulse decays
-# over tens of bins and the three-bounce bump sits on it (REFERENCE Part 4),
+# over tens of bins and the three-bounce bump sits on it (docs/stages.md),
 # so a stricter end would crop the bump away (3x3 demo: 10 % of the floor is
 # reached ~45 bins after the peak, in the middle of the bumps).
 DIRECT_END_FRACTION = 1.0

@@ -11,7 +11,7 @@ Two protocols:
   come from the remaining training part only, the best validation epoch is
   kept and the test split is evaluated once, with that model.
 
-Training follows REFERENCE Part 2 §3: Adam (betas 0.9/0.999, no weight decay,
+Training follows the reference (docs/deviations.md): Adam (betas 0.9/0.999, no weight decay,
 no schedule), cross-entropy for classification, summed MSE on metre targets
 for regression; the best epoch is chosen on Top-1 (classification) or MAE
 (regression). Batches are drawn by indexing one in-memory tensor (no

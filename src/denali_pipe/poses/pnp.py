@@ -24,7 +24,7 @@ _NO_DIST = np.zeros(5)
 
 # The one fallback for frames whose metadata carries no tracking-camera record
 # (the public release): the real tracking RealSense's calibration, 1280x720,
-# fx 923.57 fy 923.94 cx 641.69 cy 365.96 (REFERENCE Part 1 section 1), which
+# fx 923.57 fy 923.94 cx 641.69 cy 365.96 (the release's tracking camera), which
 # geometry.TRACKING_CAMERA carries; it is scaled to the frame size.
 REAL_TRACKING_INTRINSICS = geo.TRACKING_CAMERA.intrinsics
 METADATA_KEY = "tracking_camera"

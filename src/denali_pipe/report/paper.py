@@ -65,7 +65,7 @@ _TABLE10_ROWS = {
 }
 TABLE10 = {key: dict(zip(TABLE10_COLUMNS, row)) for key, row in _TABLE10_ROWS.items()}
 
-# REFERENCE Part 4: real 3x3 centre-zone histograms as read off the release's
+# Real 3x3 centre-zone histograms as read off the release's
 # three figures that plot them (+-20 %; objects and locations not stated,
 # 8 in objects by their look). Per figure, what it lets one read: floor and
 # bump as fractions of the direct peak, the bump's excess over the pre-peak
@@ -77,7 +77,7 @@ REAL_CENTRE_ZONE = {
     "digital_twin.png": {"floor_fraction": 0.02, "bump_fraction": 0.04},
 }
 
-# REFERENCE Part 5: the real 3x3 benchmark captures' mean counts per bin,
+# The real 3x3 benchmark captures' mean counts per bin,
 # averaged over all 128 bins and every capture, per zone (rows as the release
 # stores them, (1, 1) the centre), recovered from the release's trained 1D
 # CNNs' first BatchNorm (R^2 > 0.9996, the three checkpoints within 3 %).

@@ -1,6 +1,6 @@
 """`results/rig_vs_real.png` + CSV: the capture source's raw 3x3 histograms
 beside what is known of real ones: the centre zone's shape read off the
-release's figures (REFERENCE Part 4, `paper.REAL_CENTRE_ZONE`) and every
+release's figures (`paper.REAL_CENTRE_ZONE`) and every
 zone's mean counts recovered from the release's trained models (Part 5,
 `paper.REAL_ZONE_MEANS`).
 
@@ -54,7 +54,7 @@ COLUMNS = (
 # Source labels of the per-zone rows.
 ZONE_SOURCE = "capture source, every zone"
 REAL_ZONE_SOURCE = "real, every zone (release's models)"
-# The real captures' pooled spread of log1p(counts) (REFERENCE Part 2).
+# The real captures' pooled spread of log1p(counts) (the release's generalisation checkpoints).
 REAL_LOG_SPREAD = 0.78
 
 
@@ -117,7 +117,7 @@ def plot_zones(ax, means: np.ndarray, spread: float) -> None:
     real = np.asarray(REAL_ZONE_MEANS)
     x = np.arange(9)
     ax.bar(x - 0.2, means.ravel(), width=0.4, color="tab:blue", label="capture source")
-    ax.bar(x + 0.2, real.ravel(), width=0.4, color="k", alpha=0.7, label="real (REFERENCE Part 5)")
+    ax.bar(x + 0.2, real.ravel(), width=0.4, color="k", alpha=0.7, label="real (the release's checkpoints)")
     for i, (m, rv) in enumerate(zip(means.ravel(), real.ravel())):
         ax.text(i - 0.2, m, f"{100 * (m / rv - 1):+.0f} %", ha="center", va="bottom", fontsize=7, color="tab:blue")
     ax.set_xticks(x, [f"({r}, {c})" for r in range(3) for c in range(3)])

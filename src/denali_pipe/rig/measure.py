@@ -1,5 +1,5 @@
 """The numbers that describe a raw centre-zone histogram, measured the way
-REFERENCE Part 4 reads them off the release's figures of real captures, so
+docs/stages.md reads them off the release's figures of real captures, so
 the rig can be held against them (`report/rig_vs_real.py`, the physics tests).
 
 All inputs are counts per bin, (N_BINS,) float; bins are indices 0..127.

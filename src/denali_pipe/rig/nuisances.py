@@ -24,7 +24,7 @@ reproduces it, and `rig_truth.json` records every value drawn.
   driver's and TDC's delay drift with temperature between captures, left
   after the sensor's on-chip reference-SPAD correction.
 - Per subcapture of a capture (the 8x8 mode's 8 sequential measurements,
-  REFERENCE Part 6), about the capture's values:
+  docs/rig_zones.md), about the capture's values:
   - clock offset, sd 0.1 bins (8 ps): each subcapture is referenced to its
     own reference-SPAD histogram, whose peak is located only as well as its
     counts allow; at 8x8's 10 kilo-iterations per subcapture a ~4-bin wide

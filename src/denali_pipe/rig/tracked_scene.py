@@ -4,7 +4,7 @@ release's measured poses (config `rig.scene_poses`).
 
 - `design_scene()`: `geometry`'s nominal layout (STATIC_TAGS, TABLES, WALL,
   the regular gantry grid), the default.
-- `release_scene(path)`: a release `poses.json` (REFERENCE Part 1 section 1):
+- `release_scene(path)`: a release `poses.json` (docs/deviations.md):
   `tracking_avgposes` gives every static tag's averaged centre and rotation
   (tag -> world, world origin tag 14), `tracking_tag1_index_avgposes` tag 1's
   per gantry location. Tables and wall follow their tags: each table top is
