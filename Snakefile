@@ -42,6 +42,8 @@ rule all:
         "results/fig17.png",
         "results/speed_vs_accuracy.png",
         TWINS,
+        "results/twin_calibration.png",
+        CALIBRATED_TWINS,
         "results/render_benchmark.png",
         "results/fig18.png",
         "results/transforms.json",

@@ -240,11 +240,37 @@ def cmd_twin(args: argparse.Namespace) -> None:
     from denali_pipe.objects import spec_from_dict
     from denali_pipe.twin.render import render_twin
 
-    missing = {"seed", "twin"} - set(args.config)
+    missing = {"seed", "resolutions", "twin"} - set(args.config)
     if missing:
         raise ValueError(f"--config lacks the keys {sorted(missing)}")
-    render_twin(spec_from_dict(args.object), args.size, Path(args.scene), args.config, Path(args.out))
+    calibration = Path(args.calibration) if args.calibration else None
+    render_twin(spec_from_dict(args.object), args.size, Path(args.scene), args.config, Path(args.out), calibration)
     log.info("wrote %s", args.out)
+
+
+def cmd_twin_calibrate(args: argparse.Namespace) -> None:
+    import time
+
+    from denali_pipe.objects import spec_from_dict
+    from denali_pipe.report.twin_calibration import plot_calibration
+    from denali_pipe.transforms import read_real, split_pairs
+    from denali_pipe.twin.calibrate import Captures, calibrate, write_calibration
+    from denali_pipe.twin.layout import load_calibration
+
+    missing = {"seed", "fit", "twin"} - set(args.config)
+    if missing:
+        raise ValueError(f"--config lacks the keys {sorted(missing)}")
+    t0 = time.perf_counter()
+    real, keys, crop = read_real([Path(p) for p in args.features])
+    split = split_pairs(keys, args.config["seed"], args.config["fit"]["test_fraction"])
+    train = Captures(real, keys, crop).subset(split.train)
+    specs = {d["name"]: spec_from_dict(d) for d in args.objects}
+    settings = args.config["twin"]
+    result, problem, held = calibrate(load_calibration(Path(args.scene)), specs, train, settings, args.config["seed"])
+    record = {"n_captures": len(problem.y), "n_validation": len(held.y), "n_test_excluded": int(len(split.test)), "crop_start": crop, "config": args.config, "seconds": time.perf_counter() - t0}
+    write_calibration(Path(args.out), result, settings, record)
+    plot_calibration(result, held, Path(args.png))
+    log.info("wrote %s and %s (%.1f s): residual before %s, after %s", args.out, args.png, record["seconds"], result.before, result.after)
 
 
 def cmd_render_benchmark(args: argparse.Namespace) -> None:
@@ -289,17 +315,23 @@ def _pairs_and_split(args: argparse.Namespace):
 def cmd_transforms(args: argparse.Namespace) -> None:
     import time
 
-    from denali_pipe.transforms import check_fit, fit_transforms, write_transforms
+    from denali_pipe.transforms import check_fit, choose_mode, fit_zone_transforms, write_transforms
 
     t0 = time.perf_counter()
     pairs, split = _pairs_and_split(args)
     train = pairs.subset(split.train)
-    t = fit_transforms(train)
+    fit = args.config["fit"]
+    mode, residuals = choose_mode(train, args.config["seed"], fit["mode_validation_fraction"])
+    zt = fit_zone_transforms(train, mode)
     t1 = time.perf_counter()
-    boot = args.config["fit"]["bootstrap"]
-    check = check_fit(train, t, boot["resamples"], args.config["seed"], boot["level"], boot["max_rel_se"])
+    boot = fit["bootstrap"]
+    if mode == "shared":
+        checks = [check_fit(train, zt.zones[0], boot["resamples"], args.config["seed"], boot["level"], boot["max_rel_se"])] * len(zt.zones)
+    else:
+        checks = [check_fit(train.zone(z), t, boot["resamples"], args.config["seed"], boot["level"], boot["max_rel_se"]) for z, t in enumerate(zt.zones)]
     t2 = time.perf_counter()
     record = {
+        "mode_residual": residuals,
         "n_pairs": int(len(split.train)),
         "n_test_pairs": int(len(split.test)),
         "repeats": int(pairs.real.shape[1]),
@@ -309,13 +341,14 @@ def cmd_transforms(args: argparse.Namespace) -> None:
         "seconds": t2 - t0,
         "bootstrap_seconds": t2 - t1,
     }
-    write_transforms(Path(args.out), t, check, record)
+    write_transforms(Path(args.out), zt, checks, record)
     log.info(
-        "wrote %s: %s, peak SNR %.2f, identifiable %s (%.1f s, of which the bootstrap %.1f s)",
+        "wrote %s: mode %s (held-out residual %s), centre zone %s, identifiable %s (%.1f s, of which the bootstrap %.1f s)",
         args.out,
-        t.to_dict(),
-        check.peak_snr,
-        check.identifiable,
+        mode,
+        residuals,
+        zt.zones[len(zt.zones) // 2].to_dict(),
+        [c.identifiable for c in checks],
         t2 - t0,
         t2 - t1,
     )
@@ -338,10 +371,11 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     unlabelled = sorted(set(pairs.keys["location"]) - set(labels))
     if unlabelled:
         raise ValueError(f"{args.positions}: no tag 1 position for locations {unlabelled}")
-    xy = np.array([labels[int(k)] for k in pairs.keys["location"]], np.float32)
-    check = read_fit_check(Path(args.transforms))
-    if not check.identifiable:
-        log.warning("%s: the simulated fidelities use transforms the real captures do not identify (%s)", args.transforms, ", ".join(check.unidentified))
+    _, _, captures = pairs.captures()
+    xy = np.array([labels[int(k)] for k in captures["location"]], np.float32)
+    for z, check in enumerate(read_fit_check(Path(args.transforms))):
+        if not check.identifiable:
+            log.warning("%s: zone %d's simulated fidelities use transforms the real captures do not identify (%s)", args.transforms, z, ", ".join(check.unidentified))
     runs = run_fig9(pairs, xy, read_transforms(Path(args.transforms)), args.config["fit"], Hyper(**args.hyper), args.config["seed"])
     out = Path(args.out)
     table = write_fig9(runs, out, out.with_suffix(".csv"))
@@ -533,8 +567,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--object", type=_json, required=True, help="the object's sheet row as JSON")
     s.add_argument("--size", required=True, choices=["4inch", "8inch"], help="object size")
     s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "twin": {...}}')
+    s.add_argument("--calibration", help="results/twin_calibration.json: render the calibrated twin (footprints, time offset, lobe)")
     s.add_argument("--out", required=True, help="output results/twin/<object>_<size>.zarr")
     s.set_defaults(func=cmd_twin)
+
+    s = sub.add_parser("twin-calibrate", help="fit the twin's zone footprints, time offset and lobe to the training captures")
+    s.add_argument("scene", help="results/calibration/scene.json")
+    s.add_argument("--features", nargs="+", required=True, help="3x3 light-on feature stores (results/features/<set>.zarr)")
+    s.add_argument("--objects", type=_json, required=True, help="JSON list of the objects' sheet rows")
+    s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "fit": {"test_fraction": ...}, "twin": {...}}')
+    s.add_argument("--out", required=True, help="output results/twin_calibration.json")
+    s.add_argument("--png", required=True, help="the figure of real against twin per zone, before and after (CSV beside it)")
+    s.set_defaults(func=cmd_twin_calibrate)
 
     s = sub.add_parser("render-benchmark", help="twin renderers' time per scene against error to a converged reference")
     s.add_argument("scene", help="results/calibration/scene.json")
