@@ -51,10 +51,7 @@ TWIN_CALIBRATION_CONFIG = json.dumps(
     {
         "seed": config["seed"],
         "fit": {"test_fraction": FIT["test_fraction"]},
-        "twin": {
-            k: TWIN[k]
-            for k in ("wall_albedo", "object_albedo", "table", "table_albedo", "footprint", "material", "retroreflective", "calibration")
-        },
+        "twin": {k: TWIN[k] for k in ("wall_albedo", "object_albedo", "table", "table_albedo", "footprint", "material", "retroreflective", "calibration")},
     },
     sort_keys=True,
 )

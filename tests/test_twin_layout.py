@@ -12,14 +12,14 @@ from denali_pipe import geometry as geo
 from denali_pipe.meshes import object_mesh
 from denali_pipe.objects import load_catalogue
 from denali_pipe.twin.layout import (
+    Material,
+    ZoneGeometry,
     front_face,
     laser_spot,
     load_calibration,
+    material_of,
     nominal_scene,
     pixel_centres,
-    Material,
-    ZoneGeometry,
-    material_of,
     pixels_inside,
     twin_scene,
     zone_footprint,

@@ -185,7 +185,11 @@ def test_version_1_twin_store_is_refused(tmp_path):
 
 def test_render_verb(scene_json, catalogue, tmp_path, caplog):
     out = tmp_path / "A_4inch.zarr"
-    cfg = {"seed": 1, "resolutions": ["3x3"], "twin": {**SETTINGS, "renderer": "mitransient", "footprint": {"film": 2, "scale": 1.0}, "mitransient": {**SETTINGS["mitransient"], "spp": 200}}}
+    cfg = {
+        "seed": 1,
+        "resolutions": ["3x3"],
+        "twin": {**SETTINGS, "renderer": "mitransient", "footprint": {"film": 2, "scale": 1.0}, "mitransient": {**SETTINGS["mitransient"], "spp": 200}},
+    }
     args = ["twin", str(scene_json), "--object", json.dumps(catalogue["A"].to_dict()), "--size", "4inch", "--config", json.dumps(cfg), "--out", str(out)]
     assert main(args) == 0
     assert read_twin(out).attrs["renderer"] == "mitransient"

@@ -267,7 +267,14 @@ def cmd_twin_calibrate(args: argparse.Namespace) -> None:
     specs = {d["name"]: spec_from_dict(d) for d in args.objects}
     settings = args.config["twin"]
     result, problem, held = calibrate(load_calibration(Path(args.scene)), specs, train, settings, args.config["seed"])
-    record = {"n_captures": len(problem.y), "n_validation": len(held.y), "n_test_excluded": int(len(split.test)), "crop_start": crop, "config": args.config, "seconds": time.perf_counter() - t0}
+    record = {
+        "n_captures": len(problem.y),
+        "n_validation": len(held.y),
+        "n_test_excluded": int(len(split.test)),
+        "crop_start": crop,
+        "config": args.config,
+        "seconds": time.perf_counter() - t0,
+    }
     write_calibration(Path(args.out), result, settings, record)
     plot_calibration(result, held, Path(args.png))
     log.info("wrote %s and %s (%.1f s): residual before %s, after %s", args.out, args.png, record["seconds"], result.before, result.after)
@@ -375,7 +382,9 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     xy = np.array([labels[int(k)] for k in captures["location"]], np.float32)
     for z, check in enumerate(read_fit_check(Path(args.transforms))):
         if not check.identifiable:
-            log.warning("%s: zone %d's simulated fidelities use transforms the real captures do not identify (%s)", args.transforms, z, ", ".join(check.unidentified))
+            log.warning(
+                "%s: zone %d's simulated fidelities use transforms the real captures do not identify (%s)", args.transforms, z, ", ".join(check.unidentified)
+            )
     runs = run_fig9(pairs, xy, read_transforms(Path(args.transforms)), args.config["fit"], Hyper(**args.hyper), args.config["seed"])
     out = Path(args.out)
     table = write_fig9(runs, out, out.with_suffix(".csv"))

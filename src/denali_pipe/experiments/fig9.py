@@ -65,7 +65,9 @@ def panel_view(real: np.ndarray, sim: np.ndarray, panel: str) -> tuple[np.ndarra
     return real.reshape(C, R, GRID, GRID, T), sim, np.arange(ZONES)
 
 
-def sim_samples(sim: np.ndarray, zones: np.ndarray, y: np.ndarray, zt: ZoneTransforms, fidelity: str, copies: int, seed: int, crop: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+def sim_samples(
+    sim: np.ndarray, zones: np.ndarray, y: np.ndarray, zt: ZoneTransforms, fidelity: str, copies: int, seed: int, crop: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray]:
     """Simulated training samples: each twin sim (C, Z, N_BINS) of zones
     `zones` (Z,) `copies` times at `fidelity`, in the real bins crop
     (start, T). Deterministic fidelities repeat the same histogram; the noisy

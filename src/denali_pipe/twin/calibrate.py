@@ -261,7 +261,9 @@ def zone_residuals(problem: Problem, x: np.ndarray, gains: np.ndarray) -> dict:
     noise-weighted residual (1: as close as the noise allows)."""
     r = problem.residuals(x, gains)
     fit_m = problem.y - r * problem.sigma[None, :, None]
-    nl2 = np.linalg.norm((problem.y - fit_m).transpose(1, 0, 2).reshape(ZONES, -1), axis=1) / np.linalg.norm(problem.y.transpose(1, 0, 2).reshape(ZONES, -1), axis=1)
+    nl2 = np.linalg.norm((problem.y - fit_m).transpose(1, 0, 2).reshape(ZONES, -1), axis=1) / np.linalg.norm(
+        problem.y.transpose(1, 0, 2).reshape(ZONES, -1), axis=1
+    )
     return {"nl2": nl2.reshape(GRID, GRID).tolist(), "chi2": (r**2).mean(axis=(0, 2)).reshape(GRID, GRID).tolist()}
 
 
@@ -353,11 +355,22 @@ def write_calibration(path: Path, result: Result, settings: dict, record: dict) 
         "material": material_of(settings).kind,
         "object_albedo": float(settings["object_albedo"]),
         "parameters": {k: np.asarray(v).tolist() for k, v in phys.items()},
-        "units": {"offset_u": "m", "offset_v": "m", "scale": "x design", "time_offset": "bins", "pulse_sd": "bins", "lobe_width_deg": "deg", "diffuse_share": "1"},
+        "units": {
+            "offset_u": "m",
+            "offset_v": "m",
+            "scale": "x design",
+            "time_offset": "bins",
+            "pulse_sd": "bins",
+            "lobe_width_deg": "deg",
+            "diffuse_share": "1",
+        },
         "se": result.se,
         "interval": result.interval,
         "gains": result.gains.reshape(GRID, GRID).tolist(),
-        "before": {"parameters": {k: np.asarray(v).tolist() for k, v in to_physical(result.x_before, settings).items()}, "gains": result.gains_before.reshape(GRID, GRID).tolist()},
+        "before": {
+            "parameters": {k: np.asarray(v).tolist() for k, v in to_physical(result.x_before, settings).items()},
+            "gains": result.gains_before.reshape(GRID, GRID).tolist(),
+        },
         "residual": {"before": result.before, "after": result.after},
         **record,
     }
@@ -374,7 +387,11 @@ def read_calibration(path: Path) -> Fitted:
             raise ValueError(f"version {d.get('denali_twin_calibration')!r}, expected {CALIBRATION_VERSION}")
         p = d["parameters"]
         offsets = np.stack([np.asarray(p["offset_u"], float), np.asarray(p["offset_v"], float)], axis=-1)
-        settings = {"material": d["material"], "object_albedo": d["object_albedo"], "retroreflective": {k: p.get(k) for k in ("lobe_width_deg", "diffuse_share")}}
+        settings = {
+            "material": d["material"],
+            "object_albedo": d["object_albedo"],
+            "retroreflective": {k: p.get(k) for k in ("lobe_width_deg", "diffuse_share")},
+        }
         material = material_of(settings)
         return Fitted(offsets, np.asarray(p["scale"], float), float(p["time_offset"]), float(p["pulse_sd"]), np.asarray(d["gains"], float), material)
     except (OSError, KeyError, TypeError, ValueError) as e:

@@ -88,7 +88,11 @@ def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out
     histograms, footprints, seconds = {}, {}, np.zeros(len(cal.locations))
     for res in config["resolutions"]:
         n = geo.RESOLUTIONS[res]
-        twin = fitted.twin_scene(cal, mesh, settings, n, spec) if fitted else twin_scene(cal, mesh, settings, n, material=material_of(settings, spec.material == "retroreflective"))
+        twin = (
+            fitted.twin_scene(cal, mesh, settings, n, spec)
+            if fitted
+            else twin_scene(cal, mesh, settings, n, material=material_of(settings, spec.material == "retroreflective"))
+        )
         renderer = make_renderer(twin, settings, derive_seed(seed, res))
         out_res = []
         for i, location in enumerate(cal.locations):
@@ -150,7 +154,9 @@ class Twin:
             raise KeyError(f"{self.path}: the twin holds no {res} grid (it has {sorted(self.histograms)}); render it with resolutions including {res}")
         hit = np.flatnonzero(self.locations == int(location))
         if not len(hit):
-            raise KeyError(f"{self.path}: twin of {self.attrs['object']['name']} {self.attrs['size']} has no location {location} (it has {self.locations.tolist()})")
+            raise KeyError(
+                f"{self.path}: twin of {self.attrs['object']['name']} {self.attrs['size']} has no location {location} (it has {self.locations.tolist()})"
+            )
         return self.histograms[res][hit[0]]
 
 
@@ -164,7 +170,9 @@ def read_twin(path: Path) -> Twin:
     attrs = dict(group.attrs)
     version = attrs.get("denali_twin")
     if version == 1:
-        raise ValueError(f"{path}: a version 1 twin store (the centre zone only); this pipeline reads version {TWIN_VERSION} (every zone): rerender it (delete it and rerun `denali twin` or its rule)")
+        raise ValueError(
+            f"{path}: a version 1 twin store (the centre zone only); this pipeline reads version {TWIN_VERSION} (every zone): rerender it (delete it and rerun `denali twin` or its rule)"
+        )
     if version != TWIN_VERSION:
         raise ValueError(f"{path}: not a twin store (attribute denali_twin={version!r}, expected {TWIN_VERSION})")
     hist = {res: np.asarray(group[f"histogram_{res}"][:]) for res in attrs["resolutions"]}
