@@ -122,6 +122,7 @@ rule fig18:
         sets=lambda w: [store(s.name) for s in FIG18()],
         backgrounds=lambda w: [store(background_of(s).name) for s in FIG18()],
         twins=lambda w: [f"results/twin_calibrated/{s.object}_{s.size}.zarr" for s in FIG18()],
+        calibration="results/twin_calibration.json",
         crop="results/features/crop_3x3.json",
     output:
         png=report("results/fig18.png", caption="../report/fig18.rst", category="4. Digital twin"),
@@ -132,4 +133,4 @@ rule fig18:
         config=json.dumps({"seed": config["seed"], "variant": TWIN["mitransient"]["variant"], "fig18": TWIN["fig18"]}, sort_keys=True),
     shell:
         "{DENALI} fig18 {input.scene} --sets {input.sets} --backgrounds {input.backgrounds} --twins {input.twins}"
-        " --crop {input.crop} --config {params.config:q} --out {output.png} > {log} 2>&1"
+        " --calibration {input.calibration} --crop {input.crop} --config {params.config:q} --out {output.png} > {log} 2>&1"

@@ -304,7 +304,7 @@ def cmd_fig18(args: argparse.Namespace) -> None:
         raise ValueError(f"fig18: {len(args.sets)} sets, {len(args.backgrounds)} backgrounds and {len(args.twins)} twins; expected one of each per row")
     captures = [(Path(a), Path(b), Path(c)) for a, b, c in zip(args.sets, args.backgrounds, args.twins)]
     crop = json.loads(Path(args.crop).read_text())["crop_start"]
-    fig18(captures, Path(args.scene), crop, args.config, Path(args.out))
+    fig18(captures, Path(args.scene), Path(args.calibration), crop, args.config, Path(args.out))
     log.info("wrote %s", args.out)
 
 
@@ -596,11 +596,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
     s.set_defaults(func=cmd_render_benchmark)
 
-    s = sub.add_parser("fig18", help="Fig 18: tracking frames, twin renders and real vs simulated centre-pixel histograms")
+    s = sub.add_parser("fig18", help="Fig 18: tracking frames, twin renders and real vs calibrated twin histograms of every zone")
     s.add_argument("scene", help="results/calibration/scene.json")
     s.add_argument("--sets", nargs="+", required=True, help="light-on 3x3 capture-set stores, one per row")
     s.add_argument("--backgrounds", nargs="+", required=True, help="the matching NOOBJECT stores, in the same order")
-    s.add_argument("--twins", nargs="+", required=True, help="the matching twin stores (results/twin/<object>_<size>.zarr)")
+    s.add_argument("--twins", nargs="+", required=True, help="the matching calibrated twin stores (results/twin_calibrated/<object>_<size>.zarr)")
+    s.add_argument("--calibration", required=True, help="results/twin_calibration.json: the zones' gains and the pulse")
     s.add_argument("--crop", required=True, help="results/features/crop_3x3.json: the features' first kept bin")
     s.add_argument("--config", type=_json, required=True, help='JSON {"seed": ..., "variant": ..., "fig18": {...}}')
     s.add_argument("--out", required=True, help="PNG path; the plotted data goes beside it as CSV")
