@@ -269,7 +269,7 @@ def calibration_inputs(wildcards):
 
 
 # The fit's settings alone, so that a Fig 9 setting (fig9.smk) reruns no fit.
-FIT_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": {k: FIT[k] for k in ("test_fraction", "bootstrap")}}, sort_keys=True)
+FIT_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": {k: FIT[k] for k in ("test_fraction", "mode_validation_fraction", "bootstrap")}}, sort_keys=True)
 
 
 # --- Figs 10 and 11: the held-out variants (rules/generalisation.smk) ---------
