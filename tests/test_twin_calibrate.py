@@ -133,3 +133,10 @@ def test_pulse_is_a_normalised_delayed_gaussian():
     h = np.zeros(40)
     h[20] = 1.0
     assert np.argmax(C.delay(h, C.pulse(3.0, 0.5))) == 23
+
+
+def test_at_bound_names_the_pinned_coordinates():
+    x = C.initial(SETTINGS)
+    x[0], x[3], x[20], x[27] = C.OFFSET_CM_BOUND, -C.OFFSET_CM_BOUND, np.log(3.0), -20.0
+    assert C.at_bound(x, SETTINGS) == ["offset_u[0, 0]", "offset_v[0, 1]", "scale[0, 2]", "time_offset"]
+    assert C.at_bound(C.initial(SETTINGS), SETTINGS) == []

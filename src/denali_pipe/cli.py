@@ -254,7 +254,7 @@ def cmd_twin_calibrate(args: argparse.Namespace) -> None:
     from denali_pipe.objects import spec_from_dict
     from denali_pipe.report.twin_calibration import plot_calibration
     from denali_pipe.transforms import read_real, split_pairs
-    from denali_pipe.twin.calibrate import Captures, calibrate, write_calibration
+    from denali_pipe.twin.calibrate import Captures, at_bound, calibrate, write_calibration
     from denali_pipe.twin.layout import load_calibration
 
     missing = {"seed", "fit", "twin"} - set(args.config)
@@ -276,6 +276,13 @@ def cmd_twin_calibrate(args: argparse.Namespace) -> None:
         "seconds": time.perf_counter() - t0,
     }
     write_calibration(Path(args.out), result, settings, record)
+    pinned = at_bound(result.x, settings)
+    if pinned:
+        log.warning(
+            "twin calibration: %d coordinates at the edge of their range (%s): the twin's geometry cannot follow the captures there",
+            len(pinned),
+            ", ".join(pinned),
+        )
     plot_calibration(result, held, Path(args.png))
     log.info("wrote %s and %s (%.1f s): residual before %s, after %s", args.out, args.png, record["seconds"], result.before, result.after)
 

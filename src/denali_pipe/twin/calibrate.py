@@ -247,6 +247,16 @@ def fit(problem: Problem, x0: np.ndarray, max_nfev: int | None = None) -> np.nda
     return res.x
 
 
+def at_bound(x: np.ndarray, settings: dict) -> list[str]:
+    """The fit coordinates pinned at a bound (within 1e-6 of it), by name
+    (per-zone ones as name[row, col]): there the data push past the range the
+    twin's geometry allows, and the bootstrap's spread says nothing."""
+    lo, hi = _bounds(settings)
+    names = [f"offset_{'uv'[i % 2]}[{i // 2 // GRID}, {i // 2 % GRID}]" for i in range(2 * ZONES)]
+    names += [f"scale[{z // GRID}, {z % GRID}]" for z in range(ZONES)] + ["time_offset", "pulse_sd", "lobe_width_deg", "diffuse_share"][: len(x) - 3 * ZONES]
+    return [n for n, v, a, b in zip(names, x, lo, hi) if v - a < 1e-6 or b - v < 1e-6]
+
+
 def to_physical(x: np.ndarray, settings: dict) -> dict:
     """The fit coordinates as the named physical parameters (`PARAMETERS` and pulse_sd)."""
     zones, t0, sd, material = _unpack(x, settings)
@@ -372,6 +382,7 @@ def write_calibration(path: Path, result: Result, settings: dict, record: dict) 
             "gains": result.gains_before.reshape(GRID, GRID).tolist(),
         },
         "residual": {"before": result.before, "after": result.after},
+        "at_bound": at_bound(result.x, settings),
         **record,
     }
     with atomic_file(Path(path)) as tmp:
