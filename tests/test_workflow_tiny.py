@@ -390,7 +390,7 @@ def test_tsne_figures_at_both_resolutions(tiny_run):
 
 REPORTED = (
     "rig_examples.png", "rig_vs_real.png", "table4.csv", "table6.csv", "fig12.png", "detections.csv", "table5.csv", "table2.csv", "table10.csv",
-    "fig16.png", "fig17.png", "speed_vs_accuracy.png", "render_benchmark.png", "fig18.png", "transforms.json", "fig9.png",
+    "fig16.png", "fig17.png", "speed_vs_accuracy.png", "render_benchmark.png", "twin_calibration.png", "fig18.png", "transforms.json", "fig9.png",
     "fig10.png", "fig11.png", "fig13.png", "fig14.png", "table7.csv", "table8.csv", "table9.csv", "jitter.png",
 )  # fmt: skip
 
