@@ -3,6 +3,7 @@ import functools
 import json
 import shlex
 import sys
+from types import SimpleNamespace
 
 from snakemake.utils import min_version, validate
 
@@ -277,12 +278,19 @@ def fit_inputs(wildcards):
     sets = fit_sets()
     return {
         "features": [f"results/features/{s.name}.zarr" for s in sets],
-        "twins": sorted({f"results/twin/{s.object}_{s.size}.zarr" for s in sets}),
+        "twins": sorted({f"results/twin_calibrated/{s.object}_{s.size}.zarr" for s in sets}),
     }
 
 
+def calibration_inputs(wildcards):
+    """The twin calibration's captures (the fit's) and their objects' meshes."""
+    sets = fit_sets()
+    meshes = sorted({f for s in sets for f in rig_mesh_files(SimpleNamespace(object=s.object, size=s.size))})
+    return {"features": [f"results/features/{s.name}.zarr" for s in sets], "meshes": meshes}
+
+
 # The fit's settings alone, so that a Fig 9 setting (fig9.smk) reruns no fit.
-FIT_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": {k: FIT[k] for k in ("test_fraction", "bootstrap")}}, sort_keys=True)
+FIT_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": {k: FIT[k] for k in ("test_fraction", "mode_validation_fraction", "bootstrap")}}, sort_keys=True)
 
 
 # --- Figs 10 and 11: the held-out variants (rules/generalisation.smk) ---------

@@ -1,7 +1,7 @@
-# Digital twins: one job per object and size rendering every calibrated
-# location, the renderers' cost vs fidelity benchmark, and Fig 18.
-
-from types import SimpleNamespace
+# Digital twins: one job per object and size rendering every zone at every
+# calibrated location (at the design geometry, and calibrated from the
+# training captures), the twin's calibration, the renderers' cost vs
+# fidelity benchmark, and Fig 18.
 
 from denali_pipe.twin.selection import fig18_sets, twin_pairs
 
@@ -13,8 +13,9 @@ TWIN = config["twin"]
 TWIN_JOB_CONFIG = json.dumps(
     {
         "seed": config["seed"],
+        "resolutions": config["resolutions"],
         "twin": {
-            **{k: TWIN[k] for k in ("renderer", "wall_albedo", "object_albedo", "table", "table_albedo", "footprint")},
+            **{k: TWIN[k] for k in ("renderer", "wall_albedo", "object_albedo", "table", "table_albedo", "footprint", "material", "retroreflective")},
             TWIN["renderer"]: TWIN[TWIN["renderer"]],
         },
     },
@@ -42,6 +43,56 @@ rule twin:
         "{DENALI} twin {input.scene} {params.object} --size {wildcards.size} --config {params.config:q} --out {output} > {log} 2>&1"
 
 
+# The calibration's settings: the scene's, the material's and its own (analytic, so no renderer).
+TWIN_CALIBRATION_CONFIG = json.dumps(
+    {
+        "seed": config["seed"],
+        "fit": {"test_fraction": FIT["test_fraction"]},
+        "twin": {k: TWIN[k] for k in ("wall_albedo", "object_albedo", "table", "table_albedo", "footprint", "material", "retroreflective", "calibration")},
+    },
+    sort_keys=True,
+)
+
+
+rule twin_calibration:
+    input:
+        unpack(calibration_inputs),
+        scene="results/calibration/scene.json",
+    output:
+        json="results/twin_calibration.json",
+        png=report("results/twin_calibration.png", caption="../report/twin_calibration.rst", category="4. Digital twin"),
+        csv="results/twin_calibration.csv",
+    log:
+        "logs/twin_calibration.log",
+    benchmark:
+        "benchmarks/twin_calibration.tsv"
+    params:
+        objects=lambda w: json.dumps(sorted((CATALOGUE[s.object].to_dict() for s in {s.object: s for s in fit_sets()}.values()), key=lambda d: d["name"])),
+        config=TWIN_CALIBRATION_CONFIG,
+    shell:
+        "{DENALI} twin-calibration {input.scene} --features {input.features} --objects {params.objects:q} --config {params.config:q}"
+        " --out {output.json} --png {output.png} > {log} 2>&1"
+
+
+rule twin_calibrated:
+    input:
+        scene="results/calibration/scene.json",
+        calibration="results/twin_calibration.json",
+        meshes=rig_mesh_files,
+    output:
+        directory("results/twin_calibrated/{object}_{size}.zarr"),
+    log:
+        "logs/twin_calibrated/{object}_{size}.log",
+    benchmark:
+        "benchmarks/twin_calibrated/{object}_{size}.tsv"
+    params:
+        object=rig_object_arg,
+        config=TWIN_JOB_CONFIG,
+    shell:
+        "{DENALI} twin {input.scene} {params.object} --size {wildcards.size} --config {params.config:q}"
+        " --calibration {input.calibration} --out {output} > {log} 2>&1"
+
+
 rule render_benchmark:
     input:
         scene="results/calibration/scene.json",
@@ -67,7 +118,8 @@ rule fig18:
         scene="results/calibration/scene.json",
         sets=lambda w: [store(s.name) for s in FIG18()],
         backgrounds=lambda w: [store(background_of(s).name) for s in FIG18()],
-        twins=lambda w: [f"results/twin/{s.object}_{s.size}.zarr" for s in FIG18()],
+        twins=lambda w: [f"results/twin_calibrated/{s.object}_{s.size}.zarr" for s in FIG18()],
+        calibration="results/twin_calibration.json",
         crop="results/features/crop_3x3.json",
     output:
         png=report("results/fig18.png", caption="../report/fig18.rst", category="4. Digital twin"),
@@ -78,4 +130,4 @@ rule fig18:
         config=json.dumps({"seed": config["seed"], "variant": TWIN["mitransient"]["variant"], "fig18": TWIN["fig18"]}, sort_keys=True),
     shell:
         "{DENALI} fig18 {input.scene} --sets {input.sets} --backgrounds {input.backgrounds} --twins {input.twins}"
-        " --crop {input.crop} --config {params.config:q} --out {output.png} > {log} 2>&1"
+        " --calibration {input.calibration} --crop {input.crop} --config {params.config:q} --out {output.png} > {log} 2>&1"

@@ -100,7 +100,7 @@ def demo(root: Path, cfg: dict) -> None:
         cs = parse_set_name(path.name.removesuffix(".zarr"))
         if cs.object in catalogue and catalogue[cs.object].variant == "base":
             features.append(path)
-            twins.add(root / f"results/twin/{cs.object}_{cs.size}.zarr")
+            twins.add(root / f"results/twin_calibrated/{cs.object}_{cs.size}.zarr")
     twins = sorted(twins)
     if not features or not all(t.exists() for t in twins):
         raise SystemExit(f"{root}/results: needs 3x3 light-on features and their twins (missing: {[str(t) for t in twins if not t.exists()][:5]})")

@@ -32,7 +32,7 @@ from denali_pipe.geometry import select_locations
 from denali_pipe.meshes import object_mesh
 from denali_pipe.objects import load_catalogue
 from denali_pipe.twin.benchmark import benchmark_scenes, nl2, run_benchmark
-from denali_pipe.twin.layout import load_calibration, nominal_scene, twin_scene
+from denali_pipe.twin.layout import load_calibration, nominal_scene, twin_scene, zone_footprint
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -79,13 +79,15 @@ def sweep(cal, specs, cfg, settings, samples: list[int]) -> None:
     scenes = benchmark_scenes(specs, cfg["sizes"], cal.locations, settings["benchmark"]["n_scenes"], cfg["seed"])
     rows = []
     for sc in scenes:
-        twin = twin_scene(cal, object_mesh(sc.spec, sc.size), settings)
-        ref = MitransientRenderer(twin, settings["benchmark"]["reference_spp"], settings["mitransient"]["max_depth"], 1).render(sc.location).mean(axis=(0, 1))
+        twin = twin_scene(cal, object_mesh(sc.spec, sc.size), settings, relays=(zone_footprint(cal),))  # the centre zone
+        ref = (
+            MitransientRenderer(twin, settings["benchmark"]["reference_spp"], settings["mitransient"]["max_depth"], 1).render(sc.location).mean(axis=(0, 1, 2))
+        )
         for n in samples:
             r = AnalyticRenderer(twin, n)
             r.render(sc.location)
             t0 = time.perf_counter()
-            h = r.render(sc.location).mean(axis=(0, 1))
+            h = r.render(sc.location).mean(axis=(0, 1, 2))
             rows.append({"samples": n, "scene": sc.label, "points": len(r.points), "ms": 1000 * (time.perf_counter() - t0), "error_nl2": nl2(h, ref)})
     df = pd.DataFrame(rows)
     print(

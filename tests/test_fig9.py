@@ -1,6 +1,7 @@
-"""Fig 9 on tiny synthetic pairs: table shape, a real test split disjoint from
-the real training samples, determinism per seed, predictions bounded to the
-training labels' box, the predict-the-mean baseline."""
+"""Fig 9 on tiny synthetic pairs: table shape (both panels, the control), a
+real test split disjoint from the real training samples, determinism per
+seed, predictions bounded to the training labels' box, the predict-the-mean
+baseline, and the real samples saved."""
 
 from __future__ import annotations
 
@@ -9,29 +10,32 @@ import pandas as pd
 import pytest
 
 from denali_pipe import geometry as geo
-from denali_pipe.experiments.fig9 import MEAN_BASELINE, bound_to_workspace, real_samples, run_fig9
-from denali_pipe.report.fig9 import write_fig9
+from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE, PANELS, bound_to_workspace, real_samples, run_fig9
+from denali_pipe.report.fig9 import NEVER, samples_for, write_fig9
 from denali_pipe.train import Hyper
-from denali_pipe.transforms import FIDELITIES, KERNEL_BINS, Pairs, Transforms, split_pairs
+from denali_pipe.transforms import FIDELITIES, KERNEL_BINS, ZONES, Pairs, Transforms, ZoneTransforms, split_pairs
 
 CROP, T, R = 77, 51, 3
+N_CAPTURES = 30
 SETTINGS = {"test_fraction": 0.3, "fig9": {"real_samples": [0, 5, 20], "seeds": [1, 2], "sim_copies": 1}}
 HP = Hyper(lr=1e-3, epochs=1, batch_size=16, norm="raw")
-TRANSFORMS = Transforms(1e3, 1.0, tuple(np.full(KERNEL_BINS, 1 / KERNEL_BINS)), 1.0, 4.0)
+TRANSFORMS = ZoneTransforms("shared", (Transforms(1e3, 1.0, tuple(np.full(KERNEL_BINS, 1 / KERNEL_BINS)), 1.0, 4.0),) * ZONES)
 
 
 @pytest.fixture(scope="module")
 def data() -> tuple[Pairs, np.ndarray]:
-    """Two sets x 15 locations; the twin's bump moves with x, the real one is the scaled, noisy twin."""
+    """Two sets x 15 locations x 9 zones; each zone's twin bump moves with x
+    (and with the zone), the real one is the scaled, noisy twin."""
     rng = np.random.default_rng(0)
-    n = 30
-    xy = rng.uniform(-0.2, 0.2, (n, 2)).astype(np.float32)
+    xy = rng.uniform(-0.2, 0.2, (N_CAPTURES, 2)).astype(np.float32)
     b = np.arange(geo.N_BINS)
-    sim = np.exp(-0.5 * ((b - 90 - 20 * xy[:, :1]) / 2.0) ** 2).astype(np.float32) * 1e-2
-    real = (1e3 * sim[:, None, CROP : CROP + T] + rng.normal(0, 2, (n, R, T))).astype(np.float32)
-    keys = pd.DataFrame(
-        {"set": np.repeat(["A_8inch_3x3_lighton", "1_4inch_3x3_lighton"], 15), "object": "A", "size": "8inch", "location": np.tile(np.arange(15), 2)}
-    )
+    centre = 90 + 20 * np.repeat(xy[:, 0], ZONES) + np.tile(np.arange(ZONES) - 4, N_CAPTURES)
+    sim = (np.exp(-0.5 * ((b[None] - centre[:, None]) / 2.0) ** 2) * 1e-2).astype(np.float32)
+    real = (1e3 * sim[:, None, CROP : CROP + T] + rng.normal(0, 2, (len(sim), R, T))).astype(np.float32)
+    keys = pd.DataFrame({
+        "set": np.repeat(["A_8inch_3x3_lighton", "1_4inch_3x3_lighton"], 15 * ZONES), "object": "A", "size": "8inch",
+        "location": np.repeat(np.tile(np.arange(15), 2), ZONES), "zone": np.tile(np.arange(ZONES), N_CAPTURES),
+    })  # fmt: skip
     return Pairs(real, sim, keys, CROP), xy
 
 
@@ -42,30 +46,76 @@ def runs(data) -> pd.DataFrame:
 
 def test_table_shape(runs, tmp_path):
     f9 = SETTINGS["fig9"]
-    models = runs[runs["fidelity"] != MEAN_BASELINE]
-    assert len(models) == len(FIDELITIES) * len(f9["real_samples"]) * len(f9["seeds"])
+    models = runs[runs["fidelity"].isin(FIDELITIES)]
+    control = runs[runs["fidelity"] == CONTROL]
+    assert len(models) == len(PANELS) * len(FIDELITIES) * len(f9["real_samples"]) * len(f9["seeds"])
     assert set(models["fidelity"]) == set(FIDELITIES) and set(models["n_real"]) == set(f9["real_samples"])
+    assert set(control["n_real"]) == {5, 20} and (control["n_sim"] == 0).all() and set(runs["panel"]) == set(PANELS)
     assert np.isfinite(runs["rmse"]).all() and (runs["n_test"] == 9 * R).all() and (models["n_sim"] == 21).all()
     table = write_fig9(runs, tmp_path / "fig9.png", tmp_path / "fig9.csv")
-    assert len(table) == len(FIDELITIES) * len(f9["real_samples"]) + 1
-    assert {"rmse", "rmse_std", "mse", "mse_std", "mae", "mae_std", "n_seeds"} <= set(table.columns)
+    assert len(table) == len(PANELS) * (len(FIDELITIES) * len(f9["real_samples"]) + 2 + 1)
+    assert {"rmse", "rmse_std", "mse", "mse_std", "mae", "mae_std", "n_seeds", "control_n_same_rmse", "real_samples_saved"} <= set(table.columns)
     assert (table["n_seeds"] == 2).all()
+    fid = table[table["fidelity"].isin(FIDELITIES)]
+    assert (fid["real_samples_saved"] != "").all() and (table.loc[~table["fidelity"].isin(FIDELITIES), "real_samples_saved"] == "").all()
     assert pd.read_csv(tmp_path / "fig9.csv").shape == table.shape and (tmp_path / "fig9.png").stat().st_size > 0
+
+
+def test_samples_for_interpolates_along_the_control():
+    n, rmse = np.array([10.0, 50.0, 100.0]), np.array([0.10, 0.06, 0.05])
+    assert samples_for(0.08, n, rmse) == pytest.approx(30.0)
+    assert samples_for(0.12, n, rmse) == 10.0  # already there with its fewest
+    assert samples_for(0.04, n, rmse) == np.inf
+    # not monotone: the first crossing along the curve
+    assert samples_for(0.07, np.array([10.0, 50.0, 100.0]), np.array([0.10, 0.06, 0.08])) == pytest.approx(40.0)
+
+
+def test_real_samples_saved_in_the_table(tmp_path):
+    rows = [
+        {"panel": "centre", "fidelity": CONTROL, "n_real": n, "seed": 1, "n_sim": 0, "n_test": 9, "rmse": r, "mse": r * r, "mae": r, "rmse_euclidean": r}
+        for n, r in ((10, 0.10), (50, 0.06))
+    ]
+    rows += [
+        {"panel": "centre", "fidelity": "noisy", "n_real": n, "seed": 1, "n_sim": 5, "n_test": 9, "rmse": r, "mse": r * r, "mae": r, "rmse_euclidean": r}
+        for n, r in ((0, 0.08), (10, 0.05), (50, 0.12))
+    ]
+    rows += [
+        {
+            "panel": "centre",
+            "fidelity": MEAN_BASELINE,
+            "n_real": 0,
+            "seed": 1,
+            "n_sim": 0,
+            "n_test": 9,
+            "rmse": 0.11,
+            "mse": 0.0121,
+            "mae": 0.1,
+            "rmse_euclidean": 0.11,
+        }
+    ]
+    table = write_fig9(pd.DataFrame(rows), tmp_path / "f.png", tmp_path / "f.csv")
+    noisy = table[table["fidelity"] == "noisy"].set_index("n_real")
+    assert noisy.at[0, "control_n_same_rmse"] == "30" and noisy.at[0, "real_samples_saved"] == "30"
+    assert noisy.at[10, "real_samples_saved"] == NEVER
+    # the control does better with its fewest: it needs at most those, and the twins cost real samples
+    assert noisy.at[50, "control_n_same_rmse"] == "<=10" and noisy.at[50, "real_samples_saved"] == "<=-40"
 
 
 def test_real_samples_never_come_from_the_test_split(data):
     pairs, xy = data
-    split = split_pairs(pairs.keys, 42, SETTINGS["test_fraction"])
-    train = pairs.subset(split.train)
-    test_captures = set(map(tuple, pairs.keys.iloc[split.test][["set", "location"]].values))
+    real, _, keys = pairs.captures()
+    split = split_pairs(keys, 42, SETTINGS["test_fraction"])
+    assert np.array_equal(split.test, np.unique(split_pairs(pairs.keys, 42, SETTINGS["test_fraction"]).test // ZONES))  # the transforms' split
+    test_captures = set(map(tuple, keys.iloc[split.test][["set", "location"]].values))
+    train_keys = keys.iloc[split.train].reset_index(drop=True)
     for seed in (1, 2):
-        x, y, idx = real_samples(train, xy[split.train], 20, seed)
-        drawn = set(map(tuple, train.keys.iloc[idx[:, 0]][["set", "location"]].values))
+        x, y, idx = real_samples(real[split.train], xy[split.train], 20, seed)
+        drawn = set(map(tuple, train_keys.iloc[idx[:, 0]][["set", "location"]].values))
         assert drawn and not drawn & test_captures
-        assert np.array_equal(x, train.real[idx[:, 0], idx[:, 1]]) and np.array_equal(y, xy[split.train][idx[:, 0]])
-        assert np.array_equal(real_samples(train, xy[split.train], 5, seed)[2], idx[:5])  # nested as n grows
+        assert np.array_equal(x, real[split.train][idx[:, 0], idx[:, 1]]) and np.array_equal(y, xy[split.train][idx[:, 0]])
+        assert np.array_equal(real_samples(real[split.train], xy[split.train], 5, seed)[2], idx[:5])  # nested as n grows
     with pytest.raises(ValueError, match="only 63"):
-        real_samples(train, xy[split.train], 64, 1)
+        real_samples(real[split.train], xy[split.train], 64, 1)
 
 
 def test_deterministic_per_seed(data, runs):
@@ -88,25 +138,32 @@ def test_bound_to_workspace_clips_onto_the_box_edge():
 def test_run_fig9_bounds_every_model_to_its_training_labels_box(data, monkeypatch):
     """A model that answers far outside the workspace scores as if it had
     answered the box's corner: the training captures' positions (twins and
-    real repeats alike) bound every model."""
+    real repeats alike) bound every model, the control's too."""
     pairs, xy = data
     monkeypatch.setattr("denali_pipe.experiments.fig9.predict", lambda model, stats, x, norm: np.full((len(x), 2), 1e6))
     one_seed = {**SETTINGS, "fig9": {**SETTINGS["fig9"], "seeds": [1]}}
     runs = run_fig9(pairs, xy, TRANSFORMS, one_seed, HP, split_seed=42)
-    split = split_pairs(pairs.keys, 42, SETTINGS["test_fraction"])
+    split = split_pairs(pairs.captures()[2], 42, SETTINGS["test_fraction"])
     miss = np.repeat(xy[split.test], R, axis=0).astype(np.float64) - xy[split.train].max(axis=0)
-    assert np.allclose(runs[runs["fidelity"] != MEAN_BASELINE]["rmse"], np.sqrt(np.mean(miss**2)))
+    models = runs[runs["fidelity"].isin(FIDELITIES)]
+    assert np.allclose(models["rmse"], np.sqrt(np.mean(miss**2)))
+    # the control's box is its own real samples'
+    real = pairs.captures()[0][split.train]
+    for n in (5, 20):
+        _, y, _ = real_samples(real, xy[split.train], n, 1)
+        miss_n = np.repeat(xy[split.test], R, axis=0).astype(np.float64) - y.max(axis=0)
+        assert np.allclose(runs.query("fidelity == @CONTROL and n_real == @n")["rmse"], np.sqrt(np.mean(miss_n**2)))
 
 
 def test_mean_baseline_is_predicting_the_training_mean(data, runs, tmp_path):
     pairs, xy = data
-    split = split_pairs(pairs.keys, 42, SETTINGS["test_fraction"])
+    split = split_pairs(pairs.captures()[2], 42, SETTINGS["test_fraction"])
     y_test = np.repeat(xy[split.test], R, axis=0).astype(np.float64)
     miss = y_test - xy[split.train].astype(np.float64).mean(axis=0)
     baseline = runs[runs["fidelity"] == MEAN_BASELINE]
-    assert sorted(baseline["seed"]) == SETTINGS["fig9"]["seeds"]
+    assert sorted(baseline["seed"]) == sorted(SETTINGS["fig9"]["seeds"] * len(PANELS))
     assert np.allclose(baseline["rmse"], np.sqrt(np.mean(miss**2))) and np.allclose(baseline["mae"], np.mean(np.abs(miss)))
     assert np.allclose(baseline["rmse_euclidean"], np.sqrt(np.mean(np.sum(miss**2, axis=1))))
     write_fig9(runs, tmp_path / "fig9.png", tmp_path / "fig9.csv")
     row = pd.read_csv(tmp_path / "fig9.csv").query("fidelity == @MEAN_BASELINE")
-    assert len(row) == 1 and np.isclose(row["rmse"].item(), np.sqrt(np.mean(miss**2))) and row["rmse_std"].item() == 0
+    assert len(row) == len(PANELS) and np.allclose(row["rmse"], np.sqrt(np.mean(miss**2))) and (row["rmse_std"] == 0).all()

@@ -15,20 +15,25 @@ from denali_pipe.capture_sets import parse_set_name
 from denali_pipe.io.features import write_features
 from denali_pipe.preprocess import Features
 from denali_pipe.transforms import (
+    CENTRE_ZONE,
     FIDELITIES,
     KERNEL_BINS,
     SCALARS,
+    ZONES,
     Bootstrap,
     FitCheck,
     Pairs,
     Transforms,
+    ZoneTransforms,
     add_noise,
     apply,
     blur,
     bootstrap,
     build_pairs,
     check_fit,
+    choose_mode,
     fit_transforms,
+    fit_zone_transforms,
     reach,
     read_fit_check,
     read_transforms,
@@ -37,7 +42,7 @@ from denali_pipe.transforms import (
     split_pairs,
     write_transforms,
 )
-from denali_pipe.twin.render import write_twin
+from denali_pipe.twin.render import TWIN_VERSION, write_twin
 
 CROP, T, R = 77, 51, 3
 
@@ -56,7 +61,7 @@ def rendered_like(n: int, rng: np.random.Generator) -> np.ndarray:
 
 def pairs_of(real: np.ndarray, sim: np.ndarray) -> Pairs:
     n = len(real)
-    keys = pd.DataFrame({"set": ["A_8inch_3x3_lighton"] * n, "object": "A", "size": "8inch", "location": np.arange(n)})
+    keys = pd.DataFrame({"set": ["A_8inch_3x3_lighton"] * n, "object": "A", "size": "8inch", "location": np.arange(n), "zone": CENTRE_ZONE})
     return Pairs(np.asarray(real, np.float32), np.asarray(sim, np.float32), keys, CROP)
 
 
@@ -298,9 +303,12 @@ def write_set(root: Path, name: str, locations: list[int], rng: np.random.Genera
 
 
 def write_twin_store(root: Path, name: str, size: str, locations: list[int]) -> Path:
+    """A twin whose zone z (row-major) holds bin b * location + 1000 z."""
     path = root / f"{name}_{size}.zarr"
-    hist = np.tile(np.arange(geo.N_BINS, dtype=np.float32), (len(locations), 1)) * np.array(locations)[:, None]
-    write_twin(path, np.array(locations), hist, {"denali_twin": 1, "object": {"name": name}, "size": size})
+    b = np.arange(geo.N_BINS, dtype=np.float32)
+    hist = b[None, None, :] * np.array(locations)[:, None, None] + 1000 * np.arange(ZONES)[None, :, None]
+    attrs = {"denali_twin": TWIN_VERSION, "object": {"name": name}, "size": size, "resolutions": ["3x3"]}
+    write_twin(path, np.array(locations), {"3x3": hist.reshape(len(locations), 3, 3, geo.N_BINS)}, attrs)
     return path
 
 
@@ -310,9 +318,19 @@ def test_build_pairs_matches_twins_by_object_size_location(tmp_path):
     f2 = write_set(tmp_path, "1_4inch_3x3_lighton", [5], rng)
     twins = [write_twin_store(tmp_path, "A", "8inch", [1, 3, 5]), write_twin_store(tmp_path, "1", "4inch", [5])]
     p = build_pairs([f1, f2], twins)
-    assert p.real.shape == (3, R, T) and p.sim.shape == (3, geo.N_BINS) and p.crop_start == CROP
-    assert p.keys[["set", "location"]].values.tolist() == [["1_4inch_3x3_lighton", 5], ["A_8inch_3x3_lighton", 3], ["A_8inch_3x3_lighton", 5]]
-    assert p.sim[:, 1].tolist() == [5.0, 3.0, 5.0]  # the twin's own location
+    assert p.real.shape == (3 * ZONES, R, T) and p.sim.shape == (3 * ZONES, geo.N_BINS) and p.crop_start == CROP
+    centre = p.keys.iloc[CENTRE_ZONE::ZONES]
+    assert centre[["set", "location"]].values.tolist() == [["1_4inch_3x3_lighton", 5], ["A_8inch_3x3_lighton", 3], ["A_8inch_3x3_lighton", 5]]
+    assert p.keys["zone"].tolist() == list(range(ZONES)) * 3
+    assert (p.sim[::ZONES, 1] - p.sim[::ZONES, 0]).tolist() == [5.0, 3.0, 5.0]  # the twin's own location
+    assert p.sim[:ZONES, 0].tolist() == [1000.0 * z for z in range(ZONES)]  # and its own zone
+    from denali_pipe.io.features import read_features
+
+    values = read_features(f2)[1].values
+    assert np.array_equal(p.real[:ZONES], values[0].reshape(R, ZONES, T).transpose(1, 0, 2))
+    real, sim, keys = p.captures()
+    assert real.shape == (3, R, ZONES, T) and sim.shape == (3, ZONES, geo.N_BINS) and "zone" not in keys
+    assert np.array_equal(real[0], values[0].reshape(R, ZONES, T))
     with pytest.raises(ValueError, match="lacks locations \\[3\\]"):
         build_pairs([f1], [write_twin_store(tmp_path / "x", "A", "8inch", [5])])
     with pytest.raises(ValueError, match="no twin store of 1 4inch"):
@@ -341,28 +359,58 @@ def test_transforms_file_round_trip_and_bad_file(tmp_path):
         0.03,
     )
     check = FitCheck(1.5, boot, {"a_noise": 0.3, "b_noise": 2.0}, {"a_noise": "standard error 25.0% of its value (more than 10.0%)"})
-    write_transforms(tmp_path / "t.json", t, check, {"n_pairs": 1})
-    assert read_transforms(tmp_path / "t.json") == t
-    assert read_fit_check(tmp_path / "t.json") == check
-    assert json.loads((tmp_path / "t.json").read_text())["check"]["identifiable"] is False
-    (tmp_path / "bad.json").write_text(json.dumps({**t.to_dict(), "a_noise": 0.5}))
+    zt = ZoneTransforms("per_zone", tuple(Transforms(3.0 + z, 0.9, t.kernel, 1.2, 40.0) for z in range(ZONES)))
+    write_transforms(tmp_path / "t.json", zt, [check] * ZONES, {"n_pairs": 1})
+    assert read_transforms(tmp_path / "t.json") == zt
+    assert read_fit_check(tmp_path / "t.json") == [check] * ZONES
+    doc = json.loads((tmp_path / "t.json").read_text())
+    assert doc["mode"] == "per_zone" and doc["zones"][0]["check"]["identifiable"] is False
+    doc["zones"][3]["a_noise"] = 0.5
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
     with pytest.raises(ValueError, match="bad.json: parameters out of range"):
         read_transforms(tmp_path / "bad.json")
     (tmp_path / "worse.json").write_text("{}")
-    with pytest.raises(ValueError, match="worse.json: not a transforms file"):
+    with pytest.raises(ValueError, match="worse.json: no per-zone transforms"):
         read_transforms(tmp_path / "worse.json")
-    with pytest.raises(ValueError, match="worse.json: no 'check' entry"):
-        read_fit_check(tmp_path / "worse.json")
-    (tmp_path / "broken.json").write_text(json.dumps({**t.to_dict(), "check": {"peak_snr": 1.0}}))
+    doc["zones"][3]["a_noise"] = 1.2
+    doc["zones"][2]["check"] = {"peak_snr": 1.0}
+    (tmp_path / "broken.json").write_text(json.dumps(doc))
     with pytest.raises(ValueError, match="broken.json: malformed 'check' entry"):
         read_fit_check(tmp_path / "broken.json")
 
 
-def test_file_before_checked_fits_still_reads(tmp_path):
-    """A transforms.json written before fits were checked: its parameters
-    read as ever; asking for its check is a clear error naming the file."""
+def test_centre_zone_file_is_refused(tmp_path):
+    """A transforms.json of the centre zone only (before every-zone twins):
+    a clear error naming the file and what to do."""
     t = Transforms(3.0, 0.9, tuple(np.full(KERNEL_BINS, 1 / KERNEL_BINS)), 1.2, 40.0)
     (tmp_path / "old.json").write_text(json.dumps({**t.to_dict(), "kernel_bins": KERNEL_BINS, "n_pairs": 1}))
-    assert read_transforms(tmp_path / "old.json") == t
-    with pytest.raises(ValueError, match="old.json: no 'check' entry .* refit it with `denali transforms`"):
-        read_fit_check(tmp_path / "old.json")
+    with pytest.raises(ValueError, match="old.json: no per-zone transforms .* refit it with `denali transforms`"):
+        read_transforms(tmp_path / "old.json")
+
+
+def zone_pairs(gains: np.ndarray, rng: np.random.Generator, n: int = 40) -> Pairs:
+    """n captures x ZONES zones: zone z's real counts are gains[z] x 1e4 x its twin, plus noise."""
+    sim = rendered_like(n * ZONES, rng)
+    mu = np.repeat(gains[None], n, axis=0).reshape(-1, 1) * 1e4 * sim[:, CROP : CROP + T]
+    real = mu[:, None] + rng.normal(0, 1, (n * ZONES, R, T)) * np.sqrt(mu[:, None] + 4.0)
+    keys = pd.DataFrame(
+        {"set": "A_8inch_3x3_lighton", "object": "A", "size": "8inch", "location": np.repeat(np.arange(n), ZONES), "zone": np.tile(np.arange(ZONES), n)}
+    )
+    return Pairs(real.astype(np.float32), sim, keys, CROP)
+
+
+def test_mode_follows_the_held_out_residual():
+    """Zones of unequal gain (the sensor's centre-weighted pattern) call for
+    per-zone transforms; the per-zone fit recovers each gain."""
+    rng = np.random.default_rng(3)
+    gains = np.linspace(0.4, 2.6, ZONES)
+    pairs = zone_pairs(gains, rng)
+    mode, residual = choose_mode(pairs, 42, 0.3)
+    assert mode == "per_zone" and residual["per_zone"] < 0.5 * residual["shared"]
+    zt = fit_zone_transforms(pairs, mode)
+    assert np.allclose([t.a for t in zt.zones], gains * 1e4, rtol=0.1)
+    shared = fit_zone_transforms(pairs, "shared")
+    assert len(set(shared.zones)) == 1
+    # apply: each row through its own zone's transforms
+    h = zt.apply(pairs.sim[:ZONES], np.arange(ZONES), "scaled")
+    assert np.allclose(h, np.array([scale(pairs.sim[z], zt.zones[z].a, zt.zones[z].gamma) for z in range(ZONES)]))

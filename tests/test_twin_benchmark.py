@@ -47,9 +47,14 @@ def test_small_benchmark_and_figure(catalogue, tmp_path):
     }  # fmt: skip
     summary, per_scene = run_benchmark(load_calibration(path), [catalogue["A"]], ["8inch"], settings, seed=1)
     assert list(summary.configuration) == ["paper", "paper, footprint pixels", "footprint 100", "footprint 1k", "analytic"]
-    assert len(per_scene) == 5 * 3 and per_scene.error_nl2.notna().all()
+    # the paper's block reads the centre zone only; every other configuration all 9 zones of 3 scenes
+    assert len(per_scene) == 3 + 4 * 9 * 3 and per_scene.error_nl2.notna().all()
     s = summary.set_index("configuration")
-    assert s.loc["paper", "pixels"] == 64 and s.loc["paper, footprint pixels", "pixels"] > 100 and s.loc["footprint 1k", "pixels"] == 64
+    assert s.loc["paper", "pixels"] == 64 and s.loc["paper, footprint pixels", "pixels"] > 30 and s.loc["footprint 1k", "pixels"] == 64
+    assert (s.loc[["paper, footprint pixels", "footprint 100", "footprint 1k", "analytic"], "n_zones"] == 9).all() and s.loc["paper", "n_zones"] == 1
+    zones = [f"error_zone_{r}{c}" for r in range(3) for c in range(3)]
+    assert (s.loc["analytic", zones] < 0.03).all() and np.isnan(s.loc["paper", "error_zone_00"])
+    assert s.loc["analytic", "error_nl2"] == pytest.approx(s.loc["analytic", zones].mean())
     assert s.loc["footprint 1k", "error_nl2"] < s.loc["footprint 100", "error_nl2"]  # more samples, less noise
     assert s.loc["analytic", "error_nl2"] < 0.03 and s.loc["analytic", "correlation_min"] > 0.99
     assert s.loc["paper", "speedup_vs_paper"] == 1.0 and s.pareto.any()

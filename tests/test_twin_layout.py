@@ -12,14 +12,18 @@ from denali_pipe import geometry as geo
 from denali_pipe.meshes import object_mesh
 from denali_pipe.objects import load_catalogue
 from denali_pipe.twin.layout import (
+    Material,
+    ZoneGeometry,
     front_face,
     laser_spot,
     load_calibration,
+    material_of,
     nominal_scene,
     pixel_centres,
     pixels_inside,
     twin_scene,
     zone_footprint,
+    zone_footprints,
 )
 
 LOCATIONS = (0, 45, 99)
@@ -64,6 +68,52 @@ def test_footprint_is_the_centre_zone_on_the_wall(cal):
     assert np.allclose(zone_footprint(cal, 0.5).size, np.array(fp.size) / 2)
 
 
+@pytest.mark.parametrize("n", [3, 8])
+def test_zone_footprints_follow_the_sensors_zone_layout(cal, n):
+    """Each zone's rectangle covers the wall where geometry.zone_directions'
+    rays of that zone land (row 0 at the top, column 0 at the left)."""
+    fps = zone_footprints(cal, n)
+    dirs, _ = geo.zone_directions(n, 8)
+    for z, fp in enumerate(fps):
+        r, c = divmod(z, n)
+        q = geo.intersect_plane(geo.SENSOR_POSITION, dirs[r, c].reshape(-1, 3), geo.WALL)
+        assert np.allclose(fp.centre, q.mean(axis=0), atol=0.01 * 3 / n + 0.002)
+        rel = q - fp.centre
+        assert abs(np.ptp(rel @ fp.u) * 8 / 7 - fp.size[0]) < 0.1 * fp.size[0]
+    centres = np.array([fp.centre for fp in fps]).reshape(n, n, 3)
+    assert (np.diff(centres[..., 2], axis=0) < 0).all()  # row 0 at the top (+z up)
+    assert (np.diff(centres[..., 0], axis=1) > 0).all()  # column 0 at the left as the sensor sees it (+x)
+    if n == 3:
+        assert np.allclose(zone_footprint(cal).centre, fps[4].centre) and np.allclose(zone_footprint(cal).size, fps[4].size)
+
+
+def test_zone_geometry_moves_and_scales_each_zone(cal):
+    g = ZoneGeometry.nominal(3)
+    offsets = g.offsets.copy()
+    offsets[0, 2] = (0.01, -0.02)
+    scales = g.scales.copy()
+    scales[2, 1] = 1.5
+    moved = zone_footprints(cal, 3, ZoneGeometry(offsets, scales))
+    design = zone_footprints(cal, 3)
+    assert np.allclose(moved[2].centre - design[2].centre, 0.01 * cal.wall.u - 0.02 * cal.wall.v)
+    assert np.allclose(moved[7].size, np.array(design[7].size) * 1.5) and np.allclose(moved[7].centre, design[7].centre)
+    assert all(np.allclose(moved[z].centre, design[z].centre) for z in (0, 1, 3, 4, 5, 6, 8))
+    with pytest.raises(ValueError, match="3x3 grid given for a 8x8"):
+        zone_footprints(cal, 8, g)
+
+
+def test_materials_from_settings():
+    s = {"object_albedo": 0.5, "material": "retroreflective", "retroreflective": {"lobe_width_deg": 10.0, "diffuse_share": 0.3}}
+    assert material_of(s) == Material("retroreflective", 0.5, 10.0, 0.3)
+    assert material_of(s, retroreflective=False) == Material("lambertian", 0.5)  # the non-RR variants
+    assert material_of({**s, "material": "lambertian"}).kind == "lambertian"
+    assert material_of(s, calibrated={"lobe_width_deg": 4.0}).lobe_width_deg == 4.0
+    with pytest.raises(ValueError, match="unknown twin material"):
+        Material("mirror", 0.5)
+    with pytest.raises(ValueError, match="lobe needs"):
+        Material("retroreflective", 0.5, 0.0, 0.3)
+
+
 def test_laser_spot_is_on_the_axis_inside_the_footprint(cal):
     p = laser_spot(cal)
     fp = zone_footprint(cal)
@@ -98,7 +148,9 @@ def test_front_face_faces_the_wall(cal):
 
 def test_twin_scene_takes_settings(cal):
     mesh = object_mesh(load_catalogue(REPO / "config/objects.tsv")["circle"], "4inch")
-    settings = {"footprint": {"film": 4, "scale": 1.0}, "wall_albedo": 0.9, "object_albedo": 0.4, "table": True, "table_albedo": 0.3}
+    settings = {"footprint": {"film": 8, "scale": 1.0}, "wall_albedo": 0.9, "object_albedo": 0.4, "table": True, "table_albedo": 0.3}
     tw = twin_scene(cal, mesh, settings)
-    assert tw.film == 4 and tw.object_albedo == 0.4 and len(tw.tables) == 2
+    assert tw.film == 8 and tw.object_albedo == 0.4 and len(tw.tables) == 2 and len(tw.relays) == 9
+    assert tw.material == Material("lambertian", 0.4)  # no material set: the paper's
+    assert twin_scene(cal, mesh, settings, 8).film == 3 and len(twin_scene(cal, mesh, settings, 8).relays) == 64  # same pixel pitch
     assert len(twin_scene(cal, mesh, {**settings, "table": False}).tables) == 0

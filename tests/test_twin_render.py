@@ -12,7 +12,7 @@ from denali_pipe import geometry as geo
 from denali_pipe.cli import main
 from denali_pipe.meshes import front_samples, object_mesh
 from denali_pipe.twin.analytic import AnalyticRenderer
-from denali_pipe.twin.layout import load_calibration, nominal_scene, pixel_centres, twin_scene
+from denali_pipe.twin.layout import Material, load_calibration, nominal_scene, pixel_centres, twin_scene, zone_footprints
 from denali_pipe.twin.render import read_twin, render_twin
 
 LOCATIONS = (0, 9, 55, 99)  # near/far from the wall, both ends of the gantry
@@ -20,6 +20,8 @@ SETTINGS = {
     "renderer": "analytic",
     "wall_albedo": 1.0,
     "object_albedo": 0.5,
+    "material": "lambertian",
+    "retroreflective": {"lobe_width_deg": 10.0, "diffuse_share": 0.3},
     "table": False,
     "table_albedo": 0.5,
     "footprint": {"film": 8, "scale": 1.0},
@@ -59,27 +61,57 @@ def test_every_catalogue_object_builds_a_scene(mi, cal, catalogue):
     for spec in catalogue.values():
         for size in spec.sizes:
             twin = twin_scene(cal, object_mesh(spec, size), SETTINGS)
-            scene = mi.load_dict(transient_scene(mi, twin, 3, "transient_nlos_path", LOCATIONS[0]))
+            scene = mi.load_dict(transient_scene(mi, twin, twin.relays[0], 3, "transient_nlos_path", LOCATIONS[0]))
             ids = sorted(s.id() for s in scene.shapes())
-            assert ids == ["object", "relay"], (spec.name, size)
+            assert ids == ["object", "relay", "spot"], (spec.name, size)
             area = scene.shapes()[ids.index("object")].surface_area()[0]
             assert area == pytest.approx(front_samples(twin.mesh, 0.002)[1].sum(), rel=0.01), (spec.name, size)
 
 
-@pytest.mark.parametrize("name,size", [("A", "8inch"), ("1", "4inch")])
-def test_mitransient_agrees_with_the_analytic_model(cal, catalogue, name, size):
-    twin = twin_scene(cal, object_mesh(catalogue[name], size), SETTINGS)
+CORNER_CENTRE_EDGE = (0, 4, 5)  # zones away from the spot, holding it, beside it
+
+
+@pytest.mark.parametrize(
+    "name,size,material",
+    [("A", "8inch", Material("lambertian", 0.5)), ("1", "4inch", Material("lambertian", 0.5)), ("A", "8inch", Material("retroreflective", 0.5, 10.0, 0.3))],
+)
+def test_mitransient_agrees_with_the_analytic_model_zone_by_zone(cal, catalogue, name, size, material):
+    """Off-centre zones (the laser lands on the spot patch) and the centre
+    one, a Lambertian object and the retroreflective BSDF plugin."""
+    zones = tuple(zone_footprints(cal, 3)[z] for z in CORNER_CENTRE_EDGE)
+    twin = twin_scene(cal, object_mesh(catalogue[name], size), SETTINGS, relays=zones, film=8, material=material)
     mt, an = mitransient(twin, 4000), AnalyticRenderer(twin, 60)
     for location in (0, 99):
         m, a = mt.render(location), an.render(location)
-        assert m.shape == a.shape == (8, 8, geo.N_BINS)
-        m1, a1 = m.mean(axis=(0, 1)), a.mean(axis=(0, 1))
-        assert np.corrcoef(m1, a1)[0, 1] >= 0.99
-        # same units: the scale factor is 1 (not fitted)
-        assert a1.sum() / m1.sum() == pytest.approx(1.0, abs=0.03)
-        assert np.linalg.norm(a1 - m1) / np.linalg.norm(m1) < 0.03
+        assert m.shape == a.shape == (len(zones), 8, 8, geo.N_BINS)
+        for z in range(len(zones)):
+            m1, a1 = m[z].mean(axis=(0, 1)), a[z].mean(axis=(0, 1))
+            assert np.corrcoef(m1, a1)[0, 1] >= 0.99, (location, z)
+            # same units: the scale factor is 1 (not fitted)
+            assert a1.sum() / m1.sum() == pytest.approx(1.0, abs=0.03), (location, z)
+            assert np.linalg.norm(a1 - m1) / np.linalg.norm(m1) < 0.03, (location, z)
         # per pixel too: the films are laid out alike
         assert np.corrcoef(m.sum(-1).ravel(), a.sum(-1).ravel())[0, 1] > 0.99
+
+
+def test_retroreflective_lobe_returns_toward_the_spot(cal, catalogue):
+    """A narrow lobe sends the object's light back toward the spot: the
+    centre zone (around the spot) gains on a corner zone against the Lambertian plate."""
+    zones = tuple(zone_footprints(cal, 3)[z] for z in (0, 4))
+    mesh = object_mesh(catalogue["square"], "8inch")
+    lam = AnalyticRenderer(twin_scene(cal, mesh, SETTINGS, relays=zones, film=4, material=Material("lambertian", 0.5)), 30).render(55)
+    rr = AnalyticRenderer(twin_scene(cal, mesh, SETTINGS, relays=zones, film=4, material=Material("retroreflective", 0.5, 5.0, 0.1)), 30).render(55)
+    ratio = lambda h: h[1].sum() / h[0].sum()  # noqa: E731
+    assert ratio(rr) > 1.5 * ratio(lam)
+
+
+def test_tent_filter_keeps_the_mass_and_the_mean_path(cal, catalogue):
+    twin = twin_scene(cal, object_mesh(catalogue["A"], "8inch"), SETTINGS)
+    box, tent = AnalyticRenderer(twin, 30, "box").render(55), AnalyticRenderer(twin, 30, "tent").render(55)
+    b = np.arange(geo.N_BINS) + 0.5
+    assert tent.sum() == pytest.approx(box.sum(), rel=1e-9)
+    mean = lambda h: (h.sum(axis=(0, 1, 2)) * b).sum() / h.sum()  # noqa: E731
+    assert mean(tent) == pytest.approx(mean(box), abs=0.05)
 
 
 def test_arrival_bin_matches_the_geometric_path(cal, catalogue):
@@ -87,7 +119,8 @@ def test_arrival_bin_matches_the_geometric_path(cal, catalogue):
     footprint -> sensor path lands, for both renderers."""
     twin = twin_scene(cal, object_mesh(catalogue["square"], "4inch"), SETTINGS)
     pts, _ = front_samples(twin.mesh, 0.001)
-    x = pixel_centres(twin.relay, twin.film).reshape(-1, 3)
+    twin = twin_scene(cal, twin.mesh, SETTINGS, relays=(zone_footprints(cal, 3)[4],))
+    x = pixel_centres(twin.relays[0], twin.film).reshape(-1, 3)
     for location in (0, 55):
         o = twin.poses[location].apply(pts)
         opl = (
@@ -96,7 +129,7 @@ def test_arrival_bin_matches_the_geometric_path(cal, catalogue):
         )  # fmt: skip
         first, last = geo.opl_to_bin(opl.min()), geo.opl_to_bin(opl.max())
         for h in (mitransient(twin, 2000).render(location), AnalyticRenderer(twin, 60).render(location)):
-            bins = np.flatnonzero(h.mean(axis=(0, 1)) > 0)
+            bins = np.flatnonzero(h.mean(axis=(0, 1, 2)) > 0)
             assert abs(bins[0] - np.floor(first)) <= 1 and abs(bins[-1] - np.floor(last)) <= 1, (location, bins[[0, -1]], first, last)
 
 
@@ -104,9 +137,10 @@ def test_table_scene_subtracts_the_table_and_keeps_the_object(cal, catalogue):
     """With table tops at depth 3 the object's three-bounce return is
     unchanged (nothing occludes it): the table-safe sampling and the
     wall-and-table subtraction must give the analytic model back."""
-    twin = twin_scene(cal, object_mesh(catalogue["square"], "8inch"), {**SETTINGS, "table": True})
-    m = mitransient(twin, 8000).render(55).mean(axis=(0, 1))
-    a = AnalyticRenderer(twin_scene(cal, twin.mesh, SETTINGS), 60).render(55).mean(axis=(0, 1))
+    centre = (zone_footprints(cal, 3)[4],)
+    twin = twin_scene(cal, object_mesh(catalogue["square"], "8inch"), {**SETTINGS, "table": True}, relays=centre)
+    m = mitransient(twin, 8000).render(55).mean(axis=(0, 1, 2))
+    a = AnalyticRenderer(twin_scene(cal, twin.mesh, SETTINGS, relays=centre), 60).render(55).mean(axis=(0, 1, 2))
     assert np.corrcoef(m, a)[0, 1] > 0.99
     assert m.sum() / a.sum() == pytest.approx(1.0, abs=0.03)
     # the object's share of the samples: ~1 % noise here, ~6 % with mitransient's area-proportional choice
@@ -121,29 +155,47 @@ def test_analytic_refuses_a_table(cal, catalogue):
 
 def test_render_job_writes_the_twin_store(scene_json, catalogue, tmp_path):
     out = tmp_path / "circle_8inch.zarr"
-    render_twin(catalogue["circle"], "8inch", scene_json, {"seed": 7, "twin": SETTINGS}, out)
+    settings = {**SETTINGS, "footprint": {"film": 3, "scale": 1.0}, "analytic": {"samples": 30}}
+    render_twin(catalogue["circle"], "8inch", scene_json, {"seed": 7, "resolutions": ["3x3", "8x8"], "twin": settings}, out)
     t = read_twin(out)
     assert t.locations.tolist() == list(LOCATIONS)
-    assert t.histograms.shape == (len(LOCATIONS), geo.N_BINS) and t.histograms.dtype == np.float32
-    assert (t.histograms.sum(axis=1) > 0).all()
+    assert t.histograms["3x3"].shape == (len(LOCATIONS), 3, 3, geo.N_BINS) and t.histograms["3x3"].dtype == np.float32
+    assert t.histograms["8x8"].shape == (len(LOCATIONS), 8, 8, geo.N_BINS)
+    assert (t.histograms["3x3"].sum(axis=-1) > 0).all()
     assert t.attrs["renderer"] == "analytic" and t.attrs["object"]["name"] == "circle" and t.attrs["size"] == "8inch"
     assert t.attrs["bin_width_opl"] == geo.BIN_WIDTH_OPL and t.attrs["start_opl"] == geo.HIST_START_OPL
+    assert len(t.attrs["footprints"]["8x8"]) == 64 and t.attrs["calibration"] is None
     # nearer the wall and the footprint: an earlier return
-    assert np.argmax(t.histogram(9)) < np.argmax(t.histogram(99))
+    assert np.argmax(t.histogram(9)[1, 1]) < np.argmax(t.histogram(99)[1, 1])
+    # the 8x8 zones of the 3x3 centre zone's patch see about what it sees (a zone of 8x8 is ~(3/8)^2 of its area)
+    assert t.histogram(55, "8x8")[3:5, 3:5].sum(axis=-1).mean() == pytest.approx(t.histogram(55)[1, 1].sum(), rel=0.5)
     with pytest.raises(KeyError, match="no location 3"):
         t.histogram(3)
     assert not any(p.name.startswith(".") for p in tmp_path.iterdir())
 
 
+def test_version_1_twin_store_is_refused(tmp_path):
+    import zarr
+
+    path = tmp_path / "old.zarr"
+    zarr.open_group(path, mode="w", zarr_format=3).attrs.update({"denali_twin": 1})
+    with pytest.raises(ValueError, match="version 1 twin store.*rerender"):
+        read_twin(path)
+
+
 def test_render_verb(scene_json, catalogue, tmp_path, caplog):
     out = tmp_path / "A_4inch.zarr"
-    cfg = {"seed": 1, "twin": {**SETTINGS, "renderer": "mitransient", "mitransient": {**SETTINGS["mitransient"], "spp": 200}}}
+    cfg = {
+        "seed": 1,
+        "resolutions": ["3x3"],
+        "twin": {**SETTINGS, "renderer": "mitransient", "footprint": {"film": 2, "scale": 1.0}, "mitransient": {**SETTINGS["mitransient"], "spp": 200}},
+    }
     args = ["twin", str(scene_json), "--object", json.dumps(catalogue["A"].to_dict()), "--size", "4inch", "--config", json.dumps(cfg), "--out", str(out)]
     assert main(args) == 0
     assert read_twin(out).attrs["renderer"] == "mitransient"
     args[args.index("--config") + 1] = json.dumps({"seed": 1})
     assert main(args) == 1
-    assert "lacks the keys ['twin']" in caplog.text
+    assert "lacks the keys ['resolutions', 'twin']" in caplog.text
 
 
 def test_rgb_view_reproduces_the_calibrated_camera(mi, cal, catalogue):

@@ -15,7 +15,7 @@ from workflow import copy_workflow, job_counts, snakemake
 from denali_pipe.capture_sets import expected_sets
 from denali_pipe.conditions import TABLES as CONDITION_TABLES
 from denali_pipe.conditions import table_conditions
-from denali_pipe.experiments.fig9 import MEAN_BASELINE
+from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE
 from denali_pipe.experiments.generalisation import MODEL
 from denali_pipe.geometry import select_locations
 from denali_pipe.io.store import open_set
@@ -112,7 +112,8 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     own = {"rig": 2, "ingest": 8, "poses": 8, "preprocess": 8, "twin": 2}
     # (the variant datasets read the objects sheet like the benchmark's: rebuilt, with the same content)
     aggregates = {"index": 1, "table4": 1, "table6": 1, "detections": 1, "dataset": 2, "variant_dataset": 2, "render_benchmark": 1, "fig18": 1}
-    aggregates |= {"transforms": 1, "fig9": 1, "all": 1}
+    # the twin's calibration reads every training capture, so every calibrated twin follows it (9 + the new 2)
+    aggregates |= {"twin_calibration": 1, "twin_calibrated": 11, "transforms": 1, "fig9": 1, "all": 1}
     # every training cell reads its dataset; tiny: 1 seed, 13 Table 5 cells + 9 more Table 2 cells + 3 linear + Fig 14's 8x8 shape cell,
     # 10 conditioned cells of Tables 7-9 (their baselines are Table 5's) and 3 of the jitter sweep
     training = {"train": 39, "table5": 1, "table2": 1, "table10": 1, "training_curves": 2, "speed_vs_accuracy": 1, "condition_table": 3, "jitter": 1}
@@ -356,13 +357,15 @@ def test_benchmark_table_and_figure(tiny_run):
 
 def test_fig18_and_the_twins_it_uses(tiny_run):
     data = pd.read_csv(tiny_run / "results/fig18.csv")
-    assert data.groupby(["set", "location"]).size().tolist() == [128, 128]
+    assert data.groupby(["set", "location"]).size().tolist() == [9 * 128, 9 * 128]  # every zone of each capture
+    assert data.twin_counts.max() > 0
     assert (tiny_run / "results/fig18.png").stat().st_size > 50_000
     twins = sorted((tiny_run / "results/twin").glob("*.zarr"))
     assert twins
     for path in twins:
         t = read_twin(path)
-        assert t.histograms.shape == (12, 128) and (t.histograms.sum(axis=1) > 0).all()
+        assert t.histograms["3x3"].shape == (12, 3, 3, 128) and t.histograms["8x8"].shape == (12, 8, 8, 128)
+        assert (t.histograms["3x3"].sum(axis=-1) > 0).any(axis=(1, 2)).all()
         name = path.name.removesuffix(".zarr")
         bench = pd.read_csv(tiny_run / f"benchmarks/twin/{name}.tsv", sep="\t")
         assert bench.max_rss.max() < 2000  # MB per job
@@ -379,19 +382,33 @@ def test_renderer_settings_rerun_only_what_uses_them(tiny_run, tmp_path):
     out = snakemake(wd, "-n", *TARGETS, *TINY).stdout
     jobs = job_counts(out)
     assert jobs == {"render_benchmark": 1, "total": 1}
-    # the object albedo changes every twin, so Fig 18 too
+    # the object albedo changes every twin and the calibration, so Fig 18 too (it draws calibrated twins)
     preset.write_text(text.replace("twin:\n", "twin:\n  object_albedo: 0.6\n"))
     out = snakemake(wd, "-n", *TARGETS, *TINY).stdout
     jobs = job_counts(out)
-    assert jobs["twin"] == 2 and jobs["fig18"] == 1 and jobs["render_benchmark"] == 1
+    assert jobs["twin_calibration"] == 1 and jobs["twin_calibrated"] == 2 and jobs["fig18"] == 1 and jobs["render_benchmark"] == 1
+
+
+def test_twin_calibration(tiny_run):
+    c = json.loads((tiny_run / "results/twin_calibration.json").read_text())
+    assert np.shape(c["parameters"]["scale"]) == (3, 3) and set(c["se"]) == set(c["parameters"])
+    assert {"time_offset", "lobe_width_deg", "diffuse_share"} <= set(c["parameters"])  # the tiny preset's object is retroreflective
+    before, after = np.array(c["residual"]["before"]["nl2"]), np.array(c["residual"]["after"]["nl2"])
+    assert before.shape == after.shape == (3, 3) and after.mean() < before.mean()
+    assert c["n_test_excluded"] > 0 and (tiny_run / "results/twin_calibration.png").stat().st_size > 10_000
+    twins = sorted((tiny_run / "results/twin_calibrated").glob("*.zarr"))
+    assert len(twins) == 9 and all(read_twin(p).attrs["calibration"]["sha256"] for p in twins)
 
 
 def test_transforms_and_fig9(tiny_run):
     t = json.loads((tiny_run / "results/transforms.json").read_text())
-    assert t["a"] > 0 and t["a_noise"] >= 1 and t["b_noise"] >= 0
-    assert len(t["kernel"]) == t["kernel_bins"] == 11 and abs(sum(t["kernel"]) - 1) < 1e-6
+    assert t["mode"] in ("shared", "per_zone") and len(t["zones"]) == 9 and set(t["mode_residual"]) == {"shared", "per_zone"}
+    for z in t["zones"]:
+        assert z["a"] > 0 and z["a_noise"] >= 1 and z["b_noise"] >= 0
+        assert len(z["kernel"]) == t["kernel_bins"] == 11 and abs(sum(z["kernel"]) - 1) < 1e-6
     fig9 = pd.read_csv(tiny_run / "results/fig9.csv")
-    assert set(fig9["fidelity"]) == {*FIDELITIES, MEAN_BASELINE} and len(FIDELITIES) == 4
+    assert set(fig9["fidelity"]) == {*FIDELITIES, CONTROL, MEAN_BASELINE} and len(FIDELITIES) == 4
+    assert set(fig9["panel"]) == {"centre", "all_zones"} and fig9.loc[fig9["fidelity"].isin(FIDELITIES), "real_samples_saved"].notna().all()
     assert (tiny_run / "results/fig9.png").stat().st_size > 10_000
 
 
@@ -440,7 +457,7 @@ def test_tsne_figures_at_both_resolutions(tiny_run):
 
 REPORTED = (
     "rig_examples.png", "rig_vs_real.png", "table4.csv", "table6.csv", "fig12.png", "detections.csv", "table5.csv", "table2.csv", "table10.csv",
-    "fig16.png", "fig17.png", "speed_vs_accuracy.png", "render_benchmark.png", "fig18.png", "transforms.json", "fig9.png",
+    "fig16.png", "fig17.png", "speed_vs_accuracy.png", "render_benchmark.png", "twin_calibration.png", "fig18.png", "transforms.json", "fig9.png",
     "fig10.png", "fig11.png", "fig13.png", "fig14.png", "table7.csv", "table8.csv", "table9.csv", "jitter.png",
 )  # fmt: skip
 

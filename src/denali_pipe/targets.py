@@ -34,6 +34,8 @@ TARGETS = (
     Target("speed vs accuracy", "training time against headline metric per model", "results/speed_vs_accuracy.png"),
     Target("render benchmark", "the twin's renderers, cost against fidelity", "results/render_benchmark.png"),
     Target("digital twins", "simulated transients per object and size", "results/twin/{object}_{size}.zarr"),
+    Target("twin calibration", "zone footprints, time offset and lobe fitted to the training captures", "results/twin_calibration.png"),
+    Target("calibrated twins", "simulated transients per object and size, calibrated", "results/twin_calibrated/{object}_{size}.zarr"),
     Target("sim-to-real transforms", "fitted scale, blur and noise", "results/transforms.json"),
     Target("rig vs real", "the capture source's histograms beside real DENALI captures", "results/rig_vs_real.png"),
     Target("rig examples", "raw histograms beside their background", "results/rig_examples.png"),

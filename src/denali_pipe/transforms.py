@@ -1,8 +1,8 @@
 """Sim-to-real transforms (paper supplement §11.5.1): scale, blur, noise.
 
-A digital twin's centre-zone transient (`twin.render`, radiance per unit laser
-intensity per bin) is made to look like a real background-subtracted
-centre-zone histogram (counts) by three transforms, fitted once on paired
+A digital twin's zone transient (`twin.render`, radiance per unit laser
+intensity per bin) is made to look like the real background-subtracted
+histogram of the same zone (counts) by three transforms, fitted on paired
 histograms of the training captures (`fit_transforms`) and applied in order:
 
 1. scale: tau_scale[b] = a * tau_sim[b] ** gamma (a in counts per unit of the
@@ -22,6 +22,11 @@ The transforms act on the twin's full 128-bin axis; the fit compares their
 output with the real histogram in its cropped bins (`crop_start` onwards), so
 the blur near the crop edge sees the twin's bins before it, as the paper's
 128-bin transforms do.
+
+The pairs hold every zone of the 3x3 grid, one row per (capture, zone).
+The transforms are fitted either once for all zones (`shared`) or per zone
+(`per_zone`); `choose_mode` fits both on part of the training captures and
+keeps the one with the lower residual on the rest (`ZoneTransforms`).
 
 The fit (`fit_transforms`) is the likelihood of scale, blur and noise
 together, and `check_fit` says how far it can be trusted: the peak
@@ -49,7 +54,10 @@ from denali_pipe.twin.render import read_twin
 
 log = logging.getLogger(__name__)
 
-CENTRE = (1, 1)  # the centre zone of the 3x3 grid: the zone the twin renders
+GRID = 3  # the pairs' zone grid (the sim-to-real fit uses the 3x3 captures)
+ZONES = GRID * GRID
+CENTRE_ZONE = ZONES // 2  # the centre zone's index (row-major): the paper's twin
+MODES = ("shared", "per_zone")
 KERNEL_BINS = 11  # the paper's blur kernel length L
 HALF = KERNEL_BINS // 2
 FIDELITIES = ("raw", "scaled", "blurred", "noisy")  # each adds one transform to the one before
@@ -69,13 +77,14 @@ SCALARS = ("a", "gamma", "a_noise", "b_noise")
 
 @dataclass(frozen=True)
 class Pairs:
-    """Real captures and their twins, one row per capture (set, location).
+    """Real captures and their twins, one row per capture (set, location)
+    and zone, capture-major (the ZONES rows of a capture follow each other).
 
-    real: (N, R, T) float32 background-subtracted centre-zone counts of the R
+    real: (N, R, T) float32 background-subtracted counts of one zone's R
     repeats, bins crop_start .. crop_start + T - 1.
-    sim: (N, N_BINS) float32 the twin's transient of the same object, size and
-    location on the full time axis (radiance per unit laser intensity).
-    keys: N rows: set, object, size, location.
+    sim: (N, N_BINS) float32 the twin's transient of the same zone, object,
+    size and location on the full time axis (radiance per unit laser intensity).
+    keys: N rows: set, object, size, location, zone (row-major index).
     """
 
     real: np.ndarray
@@ -94,6 +103,19 @@ class Pairs:
     def subset(self, rows: np.ndarray) -> Pairs:
         return Pairs(self.real[rows], self.sim[rows], self.keys.iloc[rows].reset_index(drop=True), self.crop_start)
 
+    def zone(self, z: int) -> Pairs:
+        """The rows of zone z."""
+        return self.subset(np.flatnonzero(self.keys["zone"].to_numpy() == z))
+
+    def captures(self) -> tuple[np.ndarray, np.ndarray, pd.DataFrame]:
+        """Per capture: real (C, R, ZONES, T), sim (C, ZONES, N_BINS) and the keys of its centre-zone row."""
+        if len(self.keys) % ZONES or not (self.keys["zone"].to_numpy().reshape(-1, ZONES) == np.arange(ZONES)).all():
+            raise ValueError("captures(): the pairs do not hold every zone of each capture in order")
+        C = len(self.keys) // ZONES
+        real = self.real.reshape(C, ZONES, *self.real.shape[1:]).transpose(0, 2, 1, 3)
+        keys = self.keys.iloc[CENTRE_ZONE::ZONES].drop(columns="zone").reset_index(drop=True)
+        return real, self.sim.reshape(C, ZONES, -1), keys
+
 
 def split_pairs(keys: pd.DataFrame, seed: int, test_fraction: float) -> Split:
     """The real train/test split of the pairs (rows of `keys`): captures
@@ -105,16 +127,13 @@ def split_pairs(keys: pd.DataFrame, seed: int, test_fraction: float) -> Split:
     return Split(np.flatnonzero(train), np.flatnonzero(~train))
 
 
-def build_pairs(feature_paths: list[Path], twin_paths: list[Path]) -> Pairs:
-    """Pair every capture of the 3x3 light-on feature stores with the twin of
-    its object and size at the same location. Sets in name order, locations
-    ascending. ValueError naming the file when a set is not 3x3 light-on,
-    the crop windows differ, or a twin is missing a set or a location."""
-    twins = {}
-    for path in twin_paths:
-        t = read_twin(Path(path))
-        twins[(t.attrs["object"]["name"], t.attrs["size"])] = (Path(path), t)
-    real, sim, keys, crop = [], [], [], None
+def read_real(feature_paths: list[Path]) -> tuple[np.ndarray, pd.DataFrame, int]:
+    """Every capture of the 3x3 light-on feature stores: real (N, R, 3, 3, T)
+    float32 background-subtracted counts, keys (N rows: set, object, size,
+    location) and the first bin kept. Sets in name order, locations
+    ascending. ValueError naming the file when a set is not 3x3 light-on or
+    the crop windows differ."""
+    real, keys, crop = [], [], None
     for path in sorted(map(Path, feature_paths), key=lambda p: p.name):
         cs, f = read_features(path)
         if cs.resolution != "3x3" or cs.light != "lighton":
@@ -123,18 +142,37 @@ def build_pairs(feature_paths: list[Path], twin_paths: list[Path]) -> Pairs:
             crop = (f.crop_start, f.values.shape[-1])
         elif (f.crop_start, f.values.shape[-1]) != crop:
             raise ValueError(f"{path}: {f.values.shape[-1]} bins from bin {f.crop_start}, the other sets have {crop[1]} from bin {crop[0]}")
-        if (cs.object, cs.size) not in twins:
-            raise ValueError(f"{path}: no twin store of {cs.object} {cs.size} among {[str(p) for p, _ in twins.values()]}")
-        twin_path, twin = twins[(cs.object, cs.size)]
-        missing = sorted(set(f.locations.tolist()) - set(twin.locations.tolist()))
-        if missing:
-            raise ValueError(f"{twin_path}: the twin of {cs.name} lacks locations {missing}")
-        real.append(f.values[:, :, CENTRE[0], CENTRE[1], :])
-        sim.append(np.stack([twin.histogram(loc) for loc in f.locations]))
+        real.append(f.values)
         keys.append(pd.DataFrame({"set": cs.name, "object": cs.object, "size": cs.size, "location": f.locations.astype(np.int64)}))
     if not real:
-        raise ValueError("build_pairs: no feature stores given")
-    return Pairs(np.concatenate(real).astype(np.float32), np.concatenate(sim).astype(np.float32), pd.concat(keys, ignore_index=True), crop[0])
+        raise ValueError("no feature stores given")
+    return np.concatenate(real).astype(np.float32), pd.concat(keys, ignore_index=True), crop[0]
+
+
+def build_pairs(feature_paths: list[Path], twin_paths: list[Path]) -> Pairs:
+    """Pair every zone of every capture of the 3x3 light-on feature stores
+    (`read_real`) with the twin of its object and size at the same location
+    and zone. ValueError naming the file when a twin is missing a set or a location."""
+    twins = {}
+    for path in twin_paths:
+        t = read_twin(Path(path))
+        twins[(t.attrs["object"]["name"], t.attrs["size"])] = t
+    real, keys, crop = read_real(feature_paths)
+    sim = []
+    for (name, size), rows in keys.groupby(["object", "size"], sort=False):
+        if (name, size) not in twins:
+            raise ValueError(f"no twin store of {name} {size} among {[str(t.path) for t in twins.values()]}")
+        twin = twins[(name, size)]
+        missing = sorted(set(rows["location"].tolist()) - set(twin.locations.tolist()))
+        if missing:
+            raise ValueError(f"{twin.path}: the twin of {name} {size} lacks locations {missing}")
+    for name, size, location in zip(keys["object"], keys["size"], keys["location"]):
+        sim.append(twins[(name, size)].histogram(location, "3x3").reshape(ZONES, geo.N_BINS))
+    N, R = real.shape[:2]
+    long_keys = keys.loc[keys.index.repeat(ZONES)].reset_index(drop=True)
+    long_keys["zone"] = np.tile(np.arange(ZONES), N)
+    real = real.reshape(N, R, ZONES, -1).transpose(0, 2, 1, 3).reshape(N * ZONES, R, -1)
+    return Pairs(real, np.concatenate(sim).astype(np.float32), long_keys, crop)
 
 
 # --- the transforms ---------------------------------------------------------------------
@@ -496,23 +534,67 @@ def check_fit(pairs: Pairs, t: Transforms, resamples: int, seed: int, level: flo
     return check
 
 
+# --- per zone or shared -----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ZoneTransforms:
+    """The transforms of every zone: mode (`shared` or `per_zone`) and one
+    Transforms per zone (row-major; the same one ZONES times when shared)."""
+
+    mode: str
+    zones: tuple[Transforms, ...]
+
+    def apply(self, sim: np.ndarray, zone: np.ndarray, fidelity: str, rng: np.random.Generator | None = None) -> np.ndarray:
+        """`apply` row by row: sim (N, N_BINS), zone (N,) each row's zone index."""
+        out = np.empty(sim.shape, np.float32)
+        for z in np.unique(zone):
+            rows = np.flatnonzero(zone == z)
+            out[rows] = apply(sim[rows], self.zones[int(z)], fidelity, rng)
+        return out
+
+
+def fit_zone_transforms(pairs: Pairs, mode: str) -> ZoneTransforms:
+    """Fit the transforms on `pairs` once for all zones or once per zone."""
+    if mode not in MODES:
+        raise ValueError(f"unknown transforms mode {mode!r}; expected one of {MODES}")
+    if mode == "shared":
+        return ZoneTransforms(mode, (fit_transforms(pairs),) * ZONES)
+    return ZoneTransforms(mode, tuple(fit_transforms(pairs.zone(z)) for z in range(ZONES)))
+
+
+def mean_residual(pairs: Pairs, zt: ZoneTransforms) -> float:
+    """||repeat mean - modelled mean||^2 / ||repeat mean||^2 over every row of
+    `pairs` (the modelled mean: the scaled, blurred twin of the row's zone)."""
+    mu = pairs.crop(zt.apply(pairs.sim, pairs.keys["zone"].to_numpy(), "blurred"))
+    y = pairs.real.mean(axis=1, dtype=np.float64)
+    return float(((y - mu) ** 2).sum() / (y**2).sum())
+
+
+def choose_mode(train: Pairs, seed: int, fraction: float) -> tuple[str, dict]:
+    """The mode of the lower residual (`mean_residual`) on a share `fraction`
+    of the training captures held out of the fits of both modes (by capture,
+    drawn with `seed`). Returns the mode and {mode: residual}."""
+    inner = split_pairs(train.keys, seed, fraction)
+    fit_on, held = train.subset(inner.train), train.subset(inner.test)
+    residual = {m: mean_residual(held, fit_zone_transforms(fit_on, m)) for m in MODES}
+    return min(MODES, key=residual.get), residual
+
+
 # --- the file ---------------------------------------------------------------------------
 
 
-def write_transforms(path: Path, t: Transforms, check: FitCheck, record: dict) -> None:
-    """transforms.json: the parameters, their check (under "check") and
-    `record` (what they were fitted on)."""
+def write_transforms(path: Path, zt: ZoneTransforms, checks: list[FitCheck], record: dict) -> None:
+    """transforms.json: the mode, one entry per zone (row-major) with its
+    parameters and check (under "check"), and `record` (what they were fitted on)."""
+    zones = [{**t.to_dict(), "check": c.to_dict()} for t, c in zip(zt.zones, checks)]
     with atomic_file(Path(path)) as tmp:
-        body = {**t.to_dict(), "kernel_bins": KERNEL_BINS, "bin_width_opl": geo.BIN_WIDTH_OPL, "check": check.to_dict(), **record}
+        body = {"mode": zt.mode, "zones": zones, "kernel_bins": KERNEL_BINS, "bin_width_opl": geo.BIN_WIDTH_OPL, **record}
         tmp.write_text(json.dumps(body, indent=1) + "\n")
 
 
-def read_transforms(path: Path) -> Transforms:
-    """Read transforms.json's parameters (files written before fits were
-    checked too); ValueError naming the file when a parameter is missing or
-    out of range."""
+def _transforms(d: dict, path: Path) -> Transforms:
     try:
-        d = json.loads(Path(path).read_text())
         t = Transforms(float(d["a"]), float(d["gamma"]), tuple(float(k) for k in d["kernel"]), float(d["a_noise"]), float(d["b_noise"]))
     except (KeyError, TypeError, ValueError) as e:
         raise ValueError(f"{path}: not a transforms file ({type(e).__name__}: {e})") from None
@@ -521,20 +603,36 @@ def read_transforms(path: Path) -> Transforms:
     return t
 
 
-def read_fit_check(path: Path) -> FitCheck:
-    """Read transforms.json's check; ValueError naming the file when it has
-    none (written before fits were checked: refit with `denali transforms`)
-    or it is malformed."""
+def _zones(path: Path) -> tuple[dict, list[dict]]:
     try:
         d = json.loads(Path(path).read_text())
     except ValueError as e:
         raise ValueError(f"{path}: not a transforms file ({type(e).__name__}: {e})") from None
-    if "check" not in d:
-        raise ValueError(f"{path}: no 'check' entry (peak SNR, bootstrap, identifiability); the file predates checked fits: refit it with `denali transforms`")
-    try:
-        c, b = d["check"], d["check"]["bootstrap"]
-        boot = Bootstrap(int(b["resamples"]), int(b["seed"]), float(b["level"]), dict(b["se"]), dict(b["interval"]), float(b["kernel_l1"]))
-        noise_se = None if c["noise_se"] is None else {p: float(c["noise_se"][p]) for p in ("a_noise", "b_noise")}
-        return FitCheck(float(c["peak_snr"]), boot, noise_se, dict(c["unidentified"]))
-    except (KeyError, TypeError, ValueError) as e:
-        raise ValueError(f"{path}: malformed 'check' entry ({type(e).__name__}: {e})") from None
+    if "zones" not in d or "mode" not in d:
+        raise ValueError(f"{path}: no per-zone transforms ('mode', 'zones'): the file predates every-zone twins; refit it with `denali transforms`")
+    if d["mode"] not in MODES or len(d["zones"]) != ZONES:
+        raise ValueError(f"{path}: mode {d['mode']!r} with {len(d['zones'])} zones, expected one of {MODES} with {ZONES}")
+    return d, d["zones"]
+
+
+def read_transforms(path: Path) -> ZoneTransforms:
+    """Read transforms.json's parameters; ValueError naming the file when a
+    parameter is missing or out of range, or the file predates per-zone fits."""
+    d, zones = _zones(path)
+    return ZoneTransforms(d["mode"], tuple(_transforms(z, path) for z in zones))
+
+
+def read_fit_check(path: Path) -> list[FitCheck]:
+    """Read transforms.json's check of each zone; ValueError naming the file
+    when one is missing or malformed."""
+    _, zones = _zones(path)
+    out = []
+    for z in zones:
+        try:
+            c, b = z["check"], z["check"]["bootstrap"]
+            boot = Bootstrap(int(b["resamples"]), int(b["seed"]), float(b["level"]), dict(b["se"]), dict(b["interval"]), float(b["kernel_l1"]))
+            noise_se = None if c["noise_se"] is None else {p: float(c["noise_se"][p]) for p in ("a_noise", "b_noise")}
+            out.append(FitCheck(float(c["peak_snr"]), boot, noise_se, dict(c["unidentified"])))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"{path}: malformed 'check' entry ({type(e).__name__}: {e})") from None
+    return out

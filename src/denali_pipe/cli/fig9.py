@@ -29,10 +29,13 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     unlabelled = sorted(set(pairs.keys["location"]) - set(labels))
     if unlabelled:
         raise ValueError(f"{args.positions}: no tag 1 position for locations {unlabelled}")
-    xy = np.array([labels[int(k)] for k in pairs.keys["location"]], np.float32)
-    check = read_fit_check(Path(args.transforms))
-    if not check.identifiable:
-        log.warning("%s: the simulated fidelities use transforms the real captures do not identify (%s)", args.transforms, ", ".join(check.unidentified))
+    _, _, captures = pairs.captures()
+    xy = np.array([labels[int(k)] for k in captures["location"]], np.float32)
+    for z, check in enumerate(read_fit_check(Path(args.transforms))):
+        if not check.identifiable:
+            log.warning(
+                "%s: zone %d's simulated fidelities use transforms the real captures do not identify (%s)", args.transforms, z, ", ".join(check.unidentified)
+            )
     runs = run_fig9(pairs, xy, read_transforms(Path(args.transforms)), args.config["fit"], Hyper(**args.hyper), args.config["seed"])
     out = Path(args.out)
     table = write_fig9(runs, out, out.with_suffix(".csv"))

@@ -23,17 +23,23 @@ def pairs_and_split(args: argparse.Namespace):
 def cmd_transforms(args: argparse.Namespace) -> None:
     import time
 
-    from denali_pipe.transforms import check_fit, fit_transforms, write_transforms
+    from denali_pipe.transforms import check_fit, choose_mode, fit_zone_transforms, write_transforms
 
     t0 = time.perf_counter()
     pairs, split = pairs_and_split(args)
     train = pairs.subset(split.train)
-    t = fit_transforms(train)
+    fit = args.config["fit"]
+    mode, residuals = choose_mode(train, args.config["seed"], fit["mode_validation_fraction"])
+    zt = fit_zone_transforms(train, mode)
     t1 = time.perf_counter()
-    boot = args.config["fit"]["bootstrap"]
-    check = check_fit(train, t, boot["resamples"], args.config["seed"], boot["level"], boot["max_rel_se"])
+    boot = fit["bootstrap"]
+    if mode == "shared":
+        checks = [check_fit(train, zt.zones[0], boot["resamples"], args.config["seed"], boot["level"], boot["max_rel_se"])] * len(zt.zones)
+    else:
+        checks = [check_fit(train.zone(z), t, boot["resamples"], args.config["seed"], boot["level"], boot["max_rel_se"]) for z, t in enumerate(zt.zones)]
     t2 = time.perf_counter()
     record = {
+        "mode_residual": residuals,
         "n_pairs": int(len(split.train)),
         "n_test_pairs": int(len(split.test)),
         "repeats": int(pairs.real.shape[1]),
@@ -43,13 +49,14 @@ def cmd_transforms(args: argparse.Namespace) -> None:
         "seconds": t2 - t0,
         "bootstrap_seconds": t2 - t1,
     }
-    write_transforms(Path(args.out), t, check, record)
+    write_transforms(Path(args.out), zt, checks, record)
     log.info(
-        "wrote %s: %s, peak SNR %.2f, identifiable %s (%.1f s, of which the bootstrap %.1f s)",
+        "wrote %s: mode %s (held-out residual %s), centre zone %s, identifiable %s (%.1f s, of which the bootstrap %.1f s)",
         args.out,
-        t.to_dict(),
-        check.peak_snr,
-        check.identifiable,
+        mode,
+        residuals,
+        zt.zones[len(zt.zones) // 2].to_dict(),
+        [c.identifiable for c in checks],
         t2 - t0,
         t2 - t1,
     )

@@ -1,13 +1,18 @@
 """Fig 9 (paper supplement §11.5.2): sim-to-real transfer of a 1D CNN localiser.
 
-For each fidelity of the simulated histograms (`transforms.FIDELITIES`: raw
-twins, scaled, scaled+blurred, scaled+blurred+noisy) and each number of real
+Two panels (`PANELS`): `centre`, the paper's, where the localiser sees the
+centre zone only, and `all_zones`, where it sees all 9 zones of the 3x3
+grid. For each fidelity of the simulated histograms (`transforms.FIDELITIES`:
+raw twins, scaled, scaled+blurred, scaled+blurred+noisy, each zone by its
+own transforms, `transforms.ZoneTransforms`) and each number of real
 samples n (e.g. 0, 10, 50, 100, 200), a fresh 1D CNN learns the object's
-(x, y) from centre-pixel histograms: the twins of the training captures at
-that fidelity plus n real samples, for a fixed number of epochs (no model
-selection, as the paper). Every model is scored on the same held-out real
-test split: all repeats of the test captures (`transforms.split_pairs`, the
-split the transforms were fitted on, so they never saw a test capture).
+(x, y): the twins of the training captures at that fidelity plus n real
+samples, for a fixed number of epochs (no model selection, as the paper).
+Beside them, the control (`CONTROL`): the same localiser trained on the
+same n real samples alone (n > 0), no twin. Every model is scored on the
+same held-out real test split: all repeats of the test captures
+(`transforms.split_pairs`, the split the calibration and the transforms
+were fitted on, so they never saw a test capture).
 
 Per seed: the model's initialisation and batch order, the draw of real
 samples (one permutation of the training captures' repeats, its first n, so
@@ -42,53 +47,71 @@ from denali_pipe.preprocess import normalise
 from denali_pipe.registry import N_LOCATION_OUTPUTS
 from denali_pipe.seeds import derive_seed, rng_for
 from denali_pipe.train import Hyper, fit, infer, loss_for
-from denali_pipe.transforms import FIDELITIES, Pairs, Transforms, apply, split_pairs
+from denali_pipe.transforms import CENTRE_ZONE, FIDELITIES, GRID, ZONES, Pairs, ZoneTransforms, split_pairs
 
 log = logging.getLogger(__name__)
 
 MEAN_BASELINE = "mean_baseline"  # the `fidelity` of the predict-the-mean baseline's rows
+CONTROL = "real_only"  # the `fidelity` of the control's rows: n real samples, no twin
+PANELS = {"centre": 1, "all_zones": GRID}  # panel -> zones per side the localiser sees
 
 
-def sim_samples(pairs: Pairs, y: np.ndarray, t: Transforms, fidelity: str, copies: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Simulated training samples: each twin of `pairs` `copies` times at
-    `fidelity`, in the real bins. Deterministic fidelities repeat the same
-    histogram; the noisy one draws fresh noise per copy, so every fidelity
-    trains on the same number of samples. Returns x (copies N, T) float32,
-    y (copies N, 2) metres."""
+def panel_view(real: np.ndarray, sim: np.ndarray, panel: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What a panel's localiser sees of the captures: real (C, R, n, n, T)
+    counts, sim (C, n*n, N_BINS) twins and their zones' indices (n*n,), n
+    the panel's (`PANELS`). real: (C, R, ZONES, T); sim: (C, ZONES, N_BINS)."""
+    C, R, _, T = real.shape
+    if panel == "centre":
+        return real[:, :, [CENTRE_ZONE]].reshape(C, R, 1, 1, T), sim[:, [CENTRE_ZONE]], np.array([CENTRE_ZONE])
+    return real.reshape(C, R, GRID, GRID, T), sim, np.arange(ZONES)
+
+
+def sim_samples(
+    sim: np.ndarray, zones: np.ndarray, y: np.ndarray, zt: ZoneTransforms, fidelity: str, copies: int, seed: int, crop: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Simulated training samples: each twin sim (C, Z, N_BINS) of zones
+    `zones` (Z,) `copies` times at `fidelity`, in the real bins crop
+    (start, T). Deterministic fidelities repeat the same histogram; the noisy
+    one draws fresh noise per copy, so every fidelity trains on the same
+    number of samples. Returns x (copies C, n, n, T) float32, y (copies C, 2) metres."""
     rng = rng_for(seed, "fig9", "noise")
-    x = np.concatenate([pairs.crop(apply(pairs.sim, t, fidelity, rng)) for _ in range(copies)])
-    return x, np.tile(y, (copies, 1))
+    C, Z, _ = sim.shape
+    n = int(round(np.sqrt(Z)))
+    zone = np.tile(zones, C)
+    flat = sim.reshape(C * Z, -1)
+    x = [zt.apply(flat, zone, fidelity, rng)[:, crop[0] : crop[0] + crop[1]].reshape(C, n, n, crop[1]) for _ in range(copies)]
+    return np.concatenate(x), np.tile(y, (copies, 1))
 
 
-def real_samples(pairs: Pairs, y: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def real_samples(real: np.ndarray, y: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The first `n` of one seeded permutation of every (capture, repeat) of
-    `pairs`: x (n, T) counts, y (n, 2) metres, and their (pair row, repeat)
-    indices (n, 2). ValueError if fewer than n exist."""
-    N, R, _ = pairs.real.shape
+    real (C, R, ...): x (n, ...) counts, y (n, 2) metres, and their
+    (capture row, repeat) indices (n, 2). ValueError if fewer than n exist."""
+    N, R = real.shape[:2]
     if n > N * R:
         raise ValueError(f"fig9: {n} real samples asked for, but the training captures hold only {N * R} ({N} captures x {R} repeats)")
     flat = rng_for(seed, "fig9", "real").permutation(N * R)[:n]
     rows, reps = np.divmod(flat, R)
-    return pairs.real[rows, reps], y[rows], np.stack([rows, reps], axis=1)
+    return real[rows, reps], y[rows], np.stack([rows, reps], axis=1)
 
 
 def train_localiser(x: np.ndarray, y: np.ndarray, hp: Hyper, seed: int) -> tuple[nn.Module, tuple | None]:
-    """A fresh 1D CNN (location, one zone) trained on x (N, T), y (N, 2) for
+    """A fresh 1D CNN (location) trained on x (N, n, n, T), y (N, 2) for
     hp.epochs through `train.fit` (the cells' loop and loss, no model
     selection). Returns the model and its normalisation statistics
     (`preprocess.normalise`, from x)."""
     torch.manual_seed(seed)
     xn, stats = normalise(x, hp.norm)
-    xt = torch.from_numpy(np.ascontiguousarray(xn[:, None, None, :]))
+    xt = torch.from_numpy(np.ascontiguousarray(xn))
     yt = torch.from_numpy(np.ascontiguousarray(y, np.float32))
-    model = cnn1d("location", N_LOCATION_OUTPUTS, (1, 1, x.shape[-1]))
+    model = cnn1d("location", N_LOCATION_OUTPUTS, tuple(x.shape[1:]))
     fit(model, xt, yt, hp, seed, loss_for("location"), name="fig9 localiser")
     return model, stats
 
 
 def predict(model: nn.Module, stats: tuple | None, x: np.ndarray, norm: str) -> np.ndarray:
-    """(N, 2) predicted positions (m) of x (N, T) counts."""
-    return infer(model, torch.from_numpy(np.ascontiguousarray(normalise(x, norm, stats)[0][:, None, None, :])))
+    """(N, 2) predicted positions (m) of x (N, n, n, T) counts."""
+    return infer(model, torch.from_numpy(np.ascontiguousarray(normalise(x, norm, stats)[0])))
 
 
 def bound_to_workspace(pred: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -108,39 +131,56 @@ def workspace(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return y.min(axis=0), y.max(axis=0)
 
 
-def run_fig9(pairs: Pairs, labels: np.ndarray, t: Transforms, settings: dict, hp: Hyper, split_seed: int) -> pd.DataFrame:
-    """Every (fidelity, n real, seed) model of Fig 9 and its test metrics.
+def score(x_fit: np.ndarray, y_fit: np.ndarray, x_test: np.ndarray, y_test: np.ndarray, hp: Hyper, seed: int) -> dict:
+    """Train a localiser on x_fit, y_fit and its test metrics (predictions bounded to y_fit's box)."""
+    t0 = time.perf_counter()
+    model, stats = train_localiser(x_fit, y_fit, hp, seed)
+    m = regression_metrics(bound_to_workspace(predict(model, stats, x_test, hp.norm), *workspace(y_fit)), y_test)
+    log.info("fig9 localiser on %d samples: test RMSE %.4f m (%.1f s)", len(x_fit), m["rmse"], time.perf_counter() - t0)
+    return m
 
-    pairs: every real capture with its twin; labels: (N, 2) the true (x, y)
-    of each pair, metres; t: the fitted transforms; settings: the `fit`
-    config section (test_fraction, fig9: real_samples, seeds, sim_copies);
-    hp: Adam/batch/normalisation settings and epochs; split_seed: the seed of
-    the real train/test split (the transforms' split).
+
+def run_fig9(pairs: Pairs, labels: np.ndarray, zt: ZoneTransforms, settings: dict, hp: Hyper, split_seed: int) -> pd.DataFrame:
+    """Every (panel, fidelity or control, n real, seed) model of Fig 9 and its test metrics.
+
+    pairs: every zone of every real capture with its twin (`transforms.build_pairs`);
+    labels: (C, 2) the true (x, y) of each capture (`Pairs.captures` order),
+    metres; zt: the fitted transforms; settings: the `fit` config section
+    (test_fraction, fig9: real_samples, seeds, sim_copies); hp:
+    Adam/batch/normalisation settings and epochs; split_seed: the seed of
+    the real train/test split (the calibration's and the transforms').
 
     Returns one row per model, predictions bounded to its training labels'
-    box, and one `MEAN_BASELINE` row per seed: fidelity, n_real, seed, n_sim,
-    n_test, then `metrics.regression_metrics` on the real test samples (m, m^2)."""
-    if len(labels) != len(pairs.real):
-        raise ValueError(f"fig9: {len(labels)} labels for {len(pairs.real)} pairs")
+    box, and one `MEAN_BASELINE` row per panel and seed: panel, fidelity,
+    n_real, seed, n_sim, n_test, then `metrics.regression_metrics` on the
+    real test samples (m, m^2)."""
+    real, sim, keys = pairs.captures()
+    if len(labels) != len(keys):
+        raise ValueError(f"fig9: {len(labels)} labels for {len(keys)} captures")
     f9 = settings["fig9"]
-    split = split_pairs(pairs.keys, split_seed, settings["test_fraction"])
-    train, test = pairs.subset(split.train), pairs.subset(split.test)
-    y_train, y_test = labels[split.train], labels[split.test]
-    x_test = test.real.reshape(-1, test.bins)
-    y_test = np.repeat(y_test, test.real.shape[1], axis=0)
+    split = split_pairs(keys, split_seed, settings["test_fraction"])
+    crop = (pairs.crop_start, pairs.bins)
+    y_train, y_test = labels[split.train], np.repeat(labels[split.test], real.shape[1], axis=0)
     baseline = regression_metrics(predict_mean_baseline(y_train, len(y_test)), y_test)
     log.info("fig9 predict-the-mean baseline: test RMSE %.4f m", baseline["rmse"])
     rows = []
-    for seed in f9["seeds"]:
-        for fidelity in FIDELITIES:
-            x_sim, y_sim = sim_samples(train, y_train, t, fidelity, f9["sim_copies"], seed)
+    for panel in PANELS:
+        r_view, s_view, zones = panel_view(real, sim, panel)
+        r_train, s_train = r_view[split.train], s_view[split.train]
+        x_test = r_view[split.test].reshape(-1, *r_view.shape[2:])
+        for seed in f9["seeds"]:
+            model_seed = derive_seed(seed, "fig9", "model") % 2**31
+            common = {"panel": panel, "seed": seed, "n_test": len(x_test)}
             for n_real in f9["real_samples"]:
-                x_real, y_real, _ = real_samples(train, y_train, n_real, seed)
-                y_fit = np.concatenate([y_sim, y_real])
-                t0 = time.perf_counter()
-                model, stats = train_localiser(np.concatenate([x_sim, x_real]), y_fit, hp, derive_seed(seed, "fig9", "model") % 2**31)
-                m = regression_metrics(bound_to_workspace(predict(model, stats, x_test, hp.norm), *workspace(y_fit)), y_test)
-                log.info("fig9 seed %d %s + %d real: test RMSE %.4f m (%.1f s)", seed, fidelity, n_real, m["rmse"], time.perf_counter() - t0)
-                rows.append({"fidelity": fidelity, "n_real": n_real, "seed": seed, "n_sim": len(x_sim), "n_test": len(x_test), **m})
-        rows.append({"fidelity": MEAN_BASELINE, "n_real": 0, "seed": seed, "n_sim": 0, "n_test": len(x_test), **baseline})
+                if n_real > 0:
+                    x_real, y_real, _ = real_samples(r_train, y_train, n_real, seed)
+                    m = score(x_real, y_real, x_test, y_test, hp, model_seed)
+                    rows.append({**common, "fidelity": CONTROL, "n_real": n_real, "n_sim": 0, **m})
+            for fidelity in FIDELITIES:
+                x_sim, y_sim = sim_samples(s_train, zones, y_train, zt, fidelity, f9["sim_copies"], seed, crop)
+                for n_real in f9["real_samples"]:
+                    x_real, y_real, _ = real_samples(r_train, y_train, n_real, seed)
+                    m = score(np.concatenate([x_sim, x_real]), np.concatenate([y_sim, y_real]), x_test, y_test, hp, model_seed)
+                    rows.append({**common, "fidelity": fidelity, "n_real": n_real, "n_sim": len(x_sim), **m})
+            rows.append({**common, "fidelity": MEAN_BASELINE, "n_real": 0, "n_sim": 0, **baseline})
     return pd.DataFrame(rows)

@@ -321,9 +321,9 @@ def histograms_panel(inv: Inventory, sel: Selection, log_y: bool, template: str)
     )
 
 
-# The twin is the same Lambertian plate whatever the object's material: on a
-# non-RR variant it is no prediction of the return.
-TWIN_NOTE = "dashed: the twin (a Lambertian plate) after the scale and blur fitted on the benchmark's objects"
+# The twin's lobe and footprints are calibrated on the benchmark's (retroreflective)
+# objects; a non-RR variant's twin is a Lambertian plate with those footprints.
+TWIN_NOTE = "dashed: the calibrated twin after the centre zone's scale and blur fitted on the benchmark's objects"
 
 
 def centre_panel(inv: Inventory, sel: Selection, template: str):

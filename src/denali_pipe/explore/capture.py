@@ -21,7 +21,7 @@ from denali_pipe.explore.outputs import POSITIONS, SCENE, TRANSFORMS, Inventory,
 from denali_pipe.io.features import read_features
 from denali_pipe.io.store import CaptureStore, open_set
 from denali_pipe.preprocess import CropWindow, read_crop_window
-from denali_pipe.transforms import apply, read_transforms
+from denali_pipe.transforms import CENTRE_ZONE, apply, read_transforms
 from denali_pipe.twin.render import read_twin
 
 # The twin's overlay: the transforms that shape its mean (scale, then blur);
@@ -162,11 +162,11 @@ def _transforms(path: Path, _stamp: int):
 
 
 def twin_histogram(inv: Inventory, obj: str, size: str, location: int) -> np.ndarray:
-    """(128,) the twin's centre-zone transient at a location after the fitted
-    scale and blur: expected counts on the real histograms' time axis."""
+    """(128,) the calibrated twin's centre-zone transient at a location after
+    that zone's fitted scale and blur: expected counts on the real histograms' time axis."""
     path, tpath = inv.path(twin_path(obj, size)), inv.path(TRANSFORMS)
-    sim = _twin(path, _stamp(path)).histogram(location)
-    return apply(sim, _transforms(tpath, _stamp(tpath)), TWIN_FIDELITY)
+    sim = _twin(path, _stamp(path)).histogram(location, "3x3")[1, 1]
+    return apply(sim, _transforms(tpath, _stamp(tpath)).zones[CENTRE_ZONE], TWIN_FIDELITY)
 
 
 @lru_cache(maxsize=64)

@@ -130,7 +130,7 @@ def centre_figure(first_bin: int, repeats: np.ndarray, chosen: int, twin: np.nda
                 line=dict(color=MEASURED if len(names) == 1 else None, width=2 if bold else 1), opacity=1.0 if bold else 0.35,
             ))  # fmt: skip
     if twin is not None:
-        fig.add_trace(go.Scatter(x=t, y=twin, name="twin (Lambertian), fitted scale and blur", line=dict(color=TWIN, width=2, dash="dash")))
+        fig.add_trace(go.Scatter(x=t, y=twin, name="calibrated twin, fitted scale and blur", line=dict(color=TWIN, width=2, dash="dash")))
     fig.add_hline(y=0, line=dict(color=BACKGROUND, width=1))
     fig.update_layout(
         template=template,

@@ -22,7 +22,7 @@ from denali_pipe.saved_cell import MODEL_FILE
 ZARR = ".zarr"
 STORES = "store"
 FEATURES = "features"
-TWINS = "twin"
+TWINS = "twin_calibrated"  # the twins the transforms were fitted on
 RUNS = "runs"
 INDEX = "index"
 POSITIONS = "calibration/tag1_positions.parquet"

@@ -1,11 +1,13 @@
 """`results/render_benchmark.png` (+ `.csv`): the twin renderers' time per
-scene against their error to the converged reference, log axes, the Pareto
-front marked."""
+scene (every zone of the 3x3 grid) against their error to the converged
+reference, log axes, the Pareto front marked; beside it, the analytic
+model's error per zone."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 from matplotlib.ticker import FormatStrFormatter
 
@@ -15,7 +17,7 @@ from denali_pipe.report.figure import plt, save_figure
 def plot_render_benchmark(summary: pd.DataFrame, out_png: Path) -> None:
     """Scatter of `twin.benchmark.summarise` rows; writes the PNG and the
     summary as CSV beside it (same stem)."""
-    fig, ax = plt.subplots(figsize=(7.5, 5))
+    fig, (ax, zax) = plt.subplots(1, 2, figsize=(11, 5), gridspec_kw={"width_ratios": [2.2, 1]})
     colours = {"paper": "tab:red", "paper, footprint pixels": "tab:orange", "analytic": "tab:green"}
     for r in summary.itertuples():
         c = colours.get(r.configuration, "tab:blue")
@@ -32,8 +34,20 @@ def plot_render_benchmark(summary: pd.DataFrame, out_png: Path) -> None:
     ax.set_xlabel("time per scene (s, median)")
     ax.set_ylabel("normalised L2 error vs reference (%)")
     n, ref = int(summary.n_scenes.iloc[0]), int(summary.reference_spp.iloc[0])
-    ax.set_title(f"Twin renderers: cost vs fidelity ({n} scenes; reference: footprint, {ref:,} spp)", fontsize=9)
+    ax.set_title(f"Twin renderers: cost vs fidelity ({n} scenes x 3x3 zones; reference: footprints, {ref:,} spp)", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
+    analytic = summary[summary.configuration == "analytic"]
+    if len(analytic):
+        grid = np.array([[analytic[f"error_zone_{r}{c}"].item() for c in range(3)] for r in range(3)]) * 100
+        im = zax.imshow(grid, cmap="viridis", vmin=0)
+        for (r, c), e in np.ndenumerate(grid):
+            zax.text(c, r, f"{e:.2f} %", ha="center", va="center", color="w" if e < grid.max() / 2 else "k", fontsize=9)
+        fig.colorbar(im, ax=zax, shrink=0.7, label="normalised L2 error (%)")
+        zax.set_xticks(range(3), [f"col {c}" for c in range(3)])
+        zax.set_yticks(range(3), [f"row {r}" for r in range(3)])
+        zax.set_title("analytic vs reference, per zone\n(as the sensor sees them)", fontsize=9)
+    else:
+        zax.axis("off")
     fig.tight_layout()
     save_figure(fig, out_png, summary)

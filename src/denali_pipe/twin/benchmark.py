@@ -1,22 +1,27 @@
 """Cost vs fidelity of the twin's renderers on a fixed sample of scenes.
 
-Every configuration renders the centre pixel's transient of the same scenes
-(object, size, gantry location); its error is the normalised L2 distance
-||h - h_ref|| / ||h_ref|| to a converged reference (mitransient over the
-footprint patch at `reference_spp`), in the common units of both renderers,
-so no scale is fitted. Configurations (the `twin.benchmark` config):
+Every configuration renders every zone's transient of the 3x3 grid for the
+same scenes (object, size, gantry location); its error per zone is the
+normalised L2 distance ||h - h_ref|| / ||h_ref|| to a converged reference
+(mitransient over each zone's footprint patch at `reference_spp`), in the
+common units of both renderers, so no scale is fitted. Configurations (the
+`twin.benchmark` config):
 
 - `paper`: the paper's film, 64x64 pixels over the whole wall at
   `paper_spp`, averaged over the 8x8 block of pixels centred on the
-  footprint (the reference twin's readout). The block (~12 x 8 cm) is
-  smaller than the footprint, so its error is mostly that patch mismatch;
+  centre zone's footprint (the reference twin's readout; the centre zone
+  only). The block (~12 x 8 cm) is smaller than the footprint, so its error
+  is mostly that patch mismatch;
 - `paper, footprint pixels`: the same renders averaged over every pixel
-  whose centre falls in the footprint instead (~180 pixels): what the
-  paper's film gives at best. Its error is noise plus the difference
-  between its sampling of the patch and the 8x8 film's (1-3 %);
-- `footprint <spp>`: the relay surface is the footprint patch itself, with
-  the configured film, at each of `footprint_spp`;
+  whose centre falls in each zone's footprint instead (~180 pixels a zone):
+  what the paper's film gives at best. Its error is noise plus the
+  difference between its sampling of the patch and the zone film's;
+- `footprint <spp>`: each zone's relay surface is its footprint patch
+  itself, with the configured film, at each of `footprint_spp`;
 - `analytic`: the closed-form three-bounce model (scenes without a table).
+
+A configuration's error is the mean over its zones and scenes; the
+per-zone means are the summary's `error_zone_<row><col>` columns.
 
 Scenes come in groups of SCENES_PER_OBJECT locations of one (object, size),
 as a twin job renders many locations of one scene: the first render of a
@@ -38,7 +43,7 @@ from denali_pipe.geometry import Rect
 from denali_pipe.meshes import object_mesh
 from denali_pipe.objects import ObjectSpec
 from denali_pipe.seeds import derive_seed, rng_for
-from denali_pipe.twin.layout import Calibration, pixels_inside, twin_scene, zone_footprint
+from denali_pipe.twin.layout import Calibration, material_of, pixels_inside, twin_scene, zone_footprints
 from denali_pipe.twin.render import make_renderer
 
 log = logging.getLogger(__name__)
@@ -46,6 +51,8 @@ log = logging.getLogger(__name__)
 PAPER_FILM = 64  # the paper's whole-wall film, pixels per side
 PAPER_BLOCK = 8  # the reference twin averages an 8 x 8 block of it
 SCENES_PER_OBJECT = 4  # locations per (object, size) group of scenes
+GRID = 3  # the benchmark's zone grid
+CENTRE_ZONE = GRID * GRID // 2
 
 
 @dataclass(frozen=True)
@@ -120,25 +127,28 @@ class _Renderers:
 
     def __init__(self, cal: Calibration, settings: dict, seed: int):
         self.cal, self.settings, self.seed = cal, settings, seed
-        self.footprint = zone_footprint(cal, settings["footprint"]["scale"])
+        self.footprints = zone_footprints(cal, GRID)
         self.cache: dict = {}
 
     def get(self, config: Configuration, spec: ObjectSpec, size: str):
-        """(renderer, {readout name: pixel mask}, whether it was just built)."""
+        """(renderer, {readout name: {zone: pixel mask (relays, film, film)}}, whether it was just built)."""
         key = (config, spec.name, size)
         fresh = key not in self.cache
         if fresh:
             self.cache.clear()  # one live Mitsuba scene at a time keeps memory flat
             mesh = object_mesh(spec, size)
+            material = material_of(self.settings, spec.material == "retroreflective")
             if config.film == "wall":
-                twin = twin_scene(self.cal, mesh, self.settings, relay=self.cal.wall, film=PAPER_FILM)
+                twin = twin_scene(self.cal, mesh, self.settings, relays=(self.cal.wall,), film=PAPER_FILM, material=material)
+                fps = self.footprints
                 readouts = {
-                    config.name: centre_block(self.cal.wall, PAPER_FILM, self.footprint.centre, PAPER_BLOCK),
-                    f"{config.name}, footprint pixels": pixels_inside(self.cal.wall, PAPER_FILM, self.footprint),
+                    config.name: {CENTRE_ZONE: centre_block(self.cal.wall, PAPER_FILM, fps[CENTRE_ZONE].centre, PAPER_BLOCK)[None]},
+                    f"{config.name}, footprint pixels": {z: pixels_inside(self.cal.wall, PAPER_FILM, fp)[None] for z, fp in enumerate(fps)},
                 }
             else:
-                twin = twin_scene(self.cal, mesh, self.settings)
-                readouts = {config.name: np.ones((twin.film, twin.film), bool)}
+                twin = twin_scene(self.cal, mesh, self.settings, GRID, material=material)
+                readouts = {config.name: {z: np.arange(len(twin.relays))[:, None, None] == z for z in range(len(twin.relays))}}
+                readouts[config.name] = {z: np.broadcast_to(m, (len(twin.relays), twin.film, twin.film)) for z, m in readouts[config.name].items()}
             settings = {**self.settings, "renderer": config.renderer, "mitransient": {**self.settings["mitransient"], "spp": config.spp}}
             renderer = make_renderer(twin, settings, derive_seed(self.seed, config.name))
             self.cache[key] = (renderer, readouts)
@@ -160,7 +170,8 @@ def run_benchmark(cal: Calibration, specs: list[ObjectSpec], sizes: list[str], s
     refs = {}
     for sc in scenes:
         renderer, readouts, _ = renderers.get(reference, sc.spec, sc.size)
-        refs[sc] = renderer.render(sc.location)[readouts["reference"]].mean(axis=0)
+        image = renderer.render(sc.location)
+        refs[sc] = {z: image[mask].mean(axis=0) for z, mask in readouts["reference"].items()}
         log.info("reference %s done", sc.label)
     rows = []
     for config in configurations(bench, with_analytic=not settings["table"]):
@@ -169,15 +180,15 @@ def run_benchmark(cal: Calibration, specs: list[ObjectSpec], sizes: list[str], s
             t0 = time.perf_counter()
             image = renderer.render(sc.location)
             seconds = time.perf_counter() - t0
-            ref = refs[sc]
-            for name, mask in readouts.items():
-                h = image[mask].mean(axis=0)
-                rows.append({
-                    "configuration": name, "renderer": config.renderer, "film": config.film, "spp": config.spp,
-                    "pixels": int(mask.sum()), "scene": sc.label, "first": fresh, "seconds": seconds,
-                    "error_nl2": nl2(h, ref), "correlation": float(np.corrcoef(h, ref)[0, 1]), "scale": float(h.sum() / ref.sum()),
-                })  # fmt: skip
-                log.info("%s %s: %.3f s, error %.4f", name, sc.label, seconds, rows[-1]["error_nl2"])
+            for name, masks in readouts.items():
+                for z, mask in masks.items():
+                    h, ref = image[mask].mean(axis=0), refs[sc][z]
+                    rows.append({
+                        "configuration": name, "renderer": config.renderer, "film": config.film, "spp": config.spp,
+                        "pixels": int(mask.sum()), "scene": sc.label, "zone": z, "first": fresh, "seconds": seconds,
+                        "error_nl2": nl2(h, ref), "correlation": float(np.corrcoef(h, ref)[0, 1]), "scale": float(h.sum() / ref.sum()),
+                    })  # fmt: skip
+                log.info("%s %s: %.3f s, error %.4f (mean over zones)", name, sc.label, seconds, np.mean([r["error_nl2"] for r in rows[-len(masks) :]]))
     per_scene = pd.DataFrame(rows)
     return summarise(per_scene, int(bench["reference_spp"])), per_scene
 
@@ -185,19 +196,24 @@ def run_benchmark(cal: Calibration, specs: list[ObjectSpec], sizes: list[str], s
 def summarise(per_scene: pd.DataFrame, reference_spp: int) -> pd.DataFrame:
     """One row per configuration: time per scene (median over the renders
     that are not a group's first; over all if every render is), the first
-    renders' mean time (with kernel compilation), error mean/std/max,
-    the lowest correlation, mean scale against the reference, speed-up over
-    `paper`, and whether it is on the Pareto front of (time, error)."""
+    renders' mean time (with kernel compilation), error mean/std/max over
+    zones and scenes and the mean per zone (`error_zone_<row><col>`, empty
+    for zones a configuration does not read out), the lowest correlation,
+    mean scale against the reference, speed-up over `paper`, and whether it
+    is on the Pareto front of (time, error)."""
     rows = []
     for name, g in per_scene.groupby("configuration", sort=False):
+        one = g.drop_duplicates("scene")  # the zones of a scene share one render and its time
+        by_zone = g.groupby("zone").error_nl2.mean()
         rows.append({
             "configuration": name, "renderer": g.renderer.iloc[0], "film": g.film.iloc[0],
-            "spp": g.spp.iloc[0], "pixels": int(g.pixels.iloc[0]), "n_scenes": len(g),
-            "time_per_scene_s": float((g.seconds[~g["first"]] if (~g["first"]).any() else g.seconds).median()),
-            "first_render_s": float(g.seconds[g["first"]].mean()),
+            "spp": g.spp.iloc[0], "pixels": int(g.pixels.iloc[0]), "n_scenes": len(one), "n_zones": int(g.zone.nunique()),
+            "time_per_scene_s": float((one.seconds[~one["first"]] if (~one["first"]).any() else one.seconds).median()),
+            "first_render_s": float(one.seconds[one["first"]].mean()),
             "error_nl2": float(g.error_nl2.mean()), "error_nl2_std": float(g.error_nl2.std(ddof=1)) if len(g) > 1 else 0.0,
             "error_nl2_max": float(g.error_nl2.max()), "correlation_min": float(g.correlation.min()),
             "scale_mean": float(g.scale.mean()), "reference_spp": reference_spp,
+            **{f"error_zone_{z // GRID}{z % GRID}": float(by_zone.get(z, np.nan)) for z in range(GRID * GRID)},
         })  # fmt: skip
     df = pd.DataFrame(rows)
     paper = df.loc[df.configuration == "paper", "time_per_scene_s"]

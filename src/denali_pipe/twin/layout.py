@@ -8,13 +8,19 @@ follows the paper's (supplement section 11.4):
 - one laser spot: a pulsed point source at the sensor aimed along the
   sensor's axis, so the spot is where the centre of the TMF8828's flood
   illumination lands on the wall;
-- the film is the wall footprint of the centre zone of the 3x3 grid, a
-  wall-aligned rectangle sampled at `film` x `film` pixel centres. The relay
-  surface *is* that patch (the rest of the wall adds no three-bounce path
-  between spot, object and footprint, and a whole-wall film would spend
-  almost every sample outside the footprint);
-- the object is its wall-facing face only (a Lambertian plate): the rig's
-  model of it, and with it both renderers see exactly the same surface;
+- every zone of the sensor's 3x3 or 8x8 grid (`geometry.SENSOR_FOV_DEG`
+  tiled as `geometry.zone_directions` tiles it: row 0 at the top, column 0
+  at the left as the sensor sees it) has its own film: the zone's wall
+  footprint, a wall-aligned rectangle sampled at `film` x `film` pixel
+  centres. The relay surface *is* that patch (the rest of the wall adds no
+  three-bounce path between spot, object and footprint, and a whole-wall
+  film would spend almost every sample outside the footprints);
+- each footprint can be moved on the wall and scaled about its centre
+  (`ZoneGeometry`, fitted by `twin.calibrate`), the twin's time axis shifted
+  by a path offset, both from the captures, never by hand;
+- the object is its wall-facing face only (a plate, Lambertian or with a
+  retroreflective lobe: `twin.material`): the rig's model of it, and with it
+  both renderers see exactly the same surface;
 - table tops optionally (mitransient only).
 
 Units: metres; albedos unitless.
@@ -32,7 +38,7 @@ import trimesh
 from denali_pipe import geometry as geo
 from denali_pipe.geometry import Camera, Intrinsics, Pose, Rect
 
-CENTRE_ZONE_GRID = 3  # the twin matches the centre pixel of the 3x3 captures
+MATERIALS = ("lambertian", "retroreflective")
 
 
 @dataclass(frozen=True)
@@ -110,21 +116,56 @@ def laser_spot(cal: Calibration) -> np.ndarray:
     return geo.intersect_plane(cal.sensor_position, _ray(cal, 0.0, 0.0), cal.wall)
 
 
-def zone_footprint(cal: Calibration, scale: float = 1.0) -> Rect:
-    """The centre 3x3 zone's wall footprint as a wall-aligned rectangle.
+@dataclass(frozen=True)
+class ZoneGeometry:
+    """Where each zone of an n x n grid looks, relative to the design FoV:
+    offsets (n, n, 2) metres along the wall's (u, v) by which each zone's
+    footprint centre moves, scales (n, n) by which its size (the zone's
+    iFoV) is multiplied about that centre."""
 
-    The zone's view cone meets the wall in a near-trapezoid; the rectangle
-    spans the midpoints of its four edges (so its area matches the
-    trapezoid's to first order) and is scaled by `scale` about its centre."""
-    th, tv = (np.tan(np.deg2rad(a / 2)) / CENTRE_ZONE_GRID for a in geo.SENSOR_FOV_DEG)
-    mids = [(-th, 0.0), (th, 0.0), (0.0, -tv), (0.0, tv)]  # left, right, top, bottom edge midpoints
-    p = np.array([geo.intersect_plane(cal.sensor_position, _ray(cal, x, y), cal.wall) for x, y in mids])
+    offsets: np.ndarray
+    scales: np.ndarray
+
+    @classmethod
+    def nominal(cls, n: int, scale: float = 1.0) -> ZoneGeometry:
+        return cls(np.zeros((n, n, 2)), np.full((n, n), float(scale)))
+
+    @property
+    def n(self) -> int:
+        return self.scales.shape[0]
+
+
+def zone_footprints(cal: Calibration, n: int, zones: ZoneGeometry | None = None) -> list[Rect]:
+    """The wall footprints of the n x n zones, row-major (row 0 at the top,
+    column 0 at the left as the sensor sees them, the captures' order).
+
+    A zone's view cone meets the wall in a near-trapezoid; its rectangle
+    spans the midpoints of the four edges (so its area matches the
+    trapezoid's to first order), then is moved by the zone's offset and
+    scaled about its centre (`zones`; the design FoV when None)."""
+    zones = zones or ZoneGeometry.nominal(n)
+    if zones.n != n:
+        raise ValueError(f"zone geometry of a {zones.n}x{zones.n} grid given for a {n}x{n} one")
+    th, tv = (np.tan(np.deg2rad(a / 2)) for a in geo.SENSOR_FOV_DEG)
+    edges_h, edges_v = np.linspace(-th, th, n + 1), np.linspace(-tv, tv, n + 1)
     w = cal.wall
-    rel = p - w.centre
-    pu, pv = rel @ w.u, rel @ w.v
-    cu, cv = (pu[0] + pu[1]) / 2, (pv[2] + pv[3]) / 2
-    size = (abs(pu[1] - pu[0]) * scale, abs(pv[3] - pv[2]) * scale)
-    return Rect(w.centre + cu * w.u + cv * w.v, w.u, w.v, size)
+    rects = []
+    for r in range(n):
+        for c in range(n):
+            xm, ym = (edges_h[c] + edges_h[c + 1]) / 2, (edges_v[r] + edges_v[r + 1]) / 2
+            mids = [(edges_h[c], ym), (edges_h[c + 1], ym), (xm, edges_v[r]), (xm, edges_v[r + 1])]  # left, right, top, bottom
+            p = np.array([geo.intersect_plane(cal.sensor_position, _ray(cal, x, y), w) for x, y in mids])
+            rel = p - w.centre
+            pu, pv = rel @ w.u, rel @ w.v
+            cu, cv = (pu[0] + pu[1]) / 2 + zones.offsets[r, c, 0], (pv[2] + pv[3]) / 2 + zones.offsets[r, c, 1]
+            s = zones.scales[r, c]
+            rects.append(Rect(w.centre + cu * w.u + cv * w.v, w.u, w.v, (abs(pu[1] - pu[0]) * s, abs(pv[3] - pv[2]) * s)))
+    return rects
+
+
+def zone_footprint(cal: Calibration, scale: float = 1.0) -> Rect:
+    """The centre zone's footprint of the 3x3 grid (the paper's film), scaled by `scale`."""
+    return zone_footprints(cal, 3, ZoneGeometry.nominal(3, scale))[4]
 
 
 def pixel_centres(relay: Rect, film: int) -> np.ndarray:
@@ -156,15 +197,54 @@ def front_face(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
 
 
 @dataclass(frozen=True)
+class Material:
+    """The object's reflectance: albedo (the share of light reflected at
+    normal incidence); kind `lambertian` or `retroreflective`: then a share
+    `diffuse_share` of it Lambertian and the rest in a Gaussian lobe of
+    width `lobe_width_deg` (standard deviation of the angle between the
+    incident and outgoing directions) about the incident direction
+    (`twin.material` documents the BRDF)."""
+
+    kind: str
+    albedo: float
+    lobe_width_deg: float = 0.0
+    diffuse_share: float = 1.0
+
+    def __post_init__(self):
+        if self.kind not in MATERIALS:
+            raise ValueError(f"unknown twin material {self.kind!r}; expected one of {list(MATERIALS)}")
+        if self.kind == "retroreflective" and not (self.lobe_width_deg > 0 and 0 <= self.diffuse_share <= 1):
+            raise ValueError(f"retroreflective lobe needs a width > 0 and a diffuse share in [0, 1], got {self.lobe_width_deg}, {self.diffuse_share}")
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "albedo": self.albedo, "lobe_width_deg": self.lobe_width_deg, "diffuse_share": self.diffuse_share}
+
+
+def material_of(settings: dict, retroreflective: bool = True, calibrated: dict | None = None) -> Material:
+    """The object's material from the `twin` config section: the configured
+    kind for a retroreflective object, Lambertian for the others (the non-RR
+    variants are paper and card). `calibrated` (twin_calibration.json's
+    "material") overrides the lobe's width and diffuse share."""
+    kind = settings.get("material", "lambertian") if retroreflective else "lambertian"
+    if kind == "lambertian":
+        return Material("lambertian", float(settings["object_albedo"]))
+    lobe = {**settings["retroreflective"], **(calibrated or {})}
+    return Material(kind, float(settings["object_albedo"]), float(lobe["lobe_width_deg"]), float(lobe["diffuse_share"]))
+
+
+@dataclass(frozen=True)
 class TwinScene:
     """One object at one size in the calibrated scene; everything a renderer needs.
 
-    relay: the film's wall patch; film: pixels per side; sensor: (3,) the
-    sensor and laser origin; spot: (3,) the laser spot on the wall; mesh: the
-    object's full mesh (local); vertices/faces: its wall-facing face (local);
-    poses: {location: object pose}; tables: table tops (empty without table)."""
+    relays: the films' wall patches (one per zone, row-major, or the whole
+    wall); film: pixels per side of each; sensor: (3,) the sensor and laser
+    origin; spot: (3,) the laser spot on the wall; mesh: the object's full
+    mesh (local); vertices/faces: its wall-facing face (local); poses:
+    {location: object pose}; material: the object's; time_offset_opl: m of
+    optical path added to every path (the captures' time zero against the
+    design's); tables: table tops (empty without table)."""
 
-    relay: Rect
+    relays: tuple[Rect, ...]
     film: int
     sensor: np.ndarray
     spot: np.ndarray
@@ -173,19 +253,45 @@ class TwinScene:
     faces: np.ndarray
     poses: dict[int, Pose]
     wall_albedo: float
-    object_albedo: float
+    material: Material
+    time_offset_opl: float = 0.0
     tables: tuple[Rect, ...] = ()
     table_albedo: float = 0.0
 
+    @property
+    def object_albedo(self) -> float:
+        return self.material.albedo
 
-def twin_scene(cal: Calibration, mesh: trimesh.Trimesh, twin: dict, relay: Rect | None = None, film: int | None = None) -> TwinScene:
+
+def film_of(twin: dict, n: int) -> int:
+    """Pixels per side of each zone's film for an n x n grid: `twin.footprint.film`
+    for a 3x3 zone, the same pixel pitch for others (a zone's side scales as 1/n)."""
+    return max(1, int(round(twin["footprint"]["film"] * 3 / n)))
+
+
+def twin_scene(
+    cal: Calibration,
+    mesh: trimesh.Trimesh,
+    twin: dict,
+    n: int = 3,
+    zones: ZoneGeometry | None = None,
+    relays: tuple[Rect, ...] | None = None,
+    film: int | None = None,
+    material: Material | None = None,
+    time_offset_opl: float = 0.0,
+) -> TwinScene:
     """The twin of one object mesh from the calibration and the config's
-    `twin` section (footprint, albedos, table). `relay`/`film` override the
-    footprint patch and its film (the benchmark's whole-wall film)."""
+    `twin` section (footprint, albedos, material, table), with one film per
+    zone of the n x n grid (`zone_footprints` of `zones`, the design FoV
+    scaled by `footprint.scale` when None). `relays`/`film` override the
+    patches and their film (the benchmark's whole-wall film); `material`
+    the configured one (`material_of`)."""
     vertices, faces = front_face(mesh)
+    if relays is None:
+        relays = tuple(zone_footprints(cal, n, zones or ZoneGeometry.nominal(n, twin["footprint"]["scale"])))
     return TwinScene(
-        relay=relay if relay is not None else zone_footprint(cal, twin["footprint"]["scale"]),
-        film=int(film if film is not None else twin["footprint"]["film"]),
+        relays=tuple(relays),
+        film=int(film if film is not None else film_of(twin, n)),
         sensor=cal.sensor_position,
         spot=laser_spot(cal),
         mesh=mesh,
@@ -193,7 +299,8 @@ def twin_scene(cal: Calibration, mesh: trimesh.Trimesh, twin: dict, relay: Rect 
         faces=faces,
         poses=cal.object_poses,
         wall_albedo=float(twin["wall_albedo"]),
-        object_albedo=float(twin["object_albedo"]),
+        material=material or material_of(twin),
+        time_offset_opl=float(time_offset_opl),
         tables=cal.tables if twin["table"] else (),
         table_albedo=float(twin["table_albedo"]),
     )

@@ -2,10 +2,11 @@
 mitransient's `transient_nlos_path` (laser sampling + hidden-geometry
 sampling), on `llvm_ad_rgb` on CPU or `cuda_ad_rgb` on a GPU.
 
-One Mitsuba scene per (object, size): the object's mesh is moved between
-locations by rewriting its vertex buffer, so the kernels compile once per
-scene and spp. The histogram is the radiance of the footprint's pixels in
-the analytic renderer's units (see `twin.scene`), averaged over RGB.
+One Mitsuba scene per (object, size) and relay patch (each zone's
+footprint is its own relay rectangle and film): the object's mesh is moved
+between locations by rewriting its vertex buffer, so the kernels compile
+once per scene and spp. The histograms are the radiance of the patches'
+pixels in the analytic renderer's units (see `twin.scene`), averaged over RGB.
 
 With table tops in the scene:
 - mitransient's hidden-geometry sampling picks a point on a hidden shape and
@@ -100,24 +101,30 @@ class MitransientRenderer:
         if twin.tables:
             _register_table_safe_integrator(mi)
             integrator = TABLE_SAFE_INTEGRATOR
-        scene = transient_scene(mi, twin, max_depth, integrator, min(twin.poses))
-        if twin.tables:
-            scene["integrator"]["nlos_hidden_geometry_sampling_max_depth"] = 1
-        self.scene = mi.load_dict(scene)
-        self.params = mi.traverse(self.scene)
-        self.away = -twin.relay.normal * AWAY_M  # behind the wall, where nothing reaches the footprint
+        self.scenes = []
+        for relay in twin.relays:
+            scene = transient_scene(mi, twin, relay, max_depth, integrator, min(twin.poses))
+            if twin.tables:
+                scene["integrator"]["nlos_hidden_geometry_sampling_max_depth"] = 1
+            loaded = mi.load_dict(scene)
+            self.scenes.append((loaded, mi.traverse(loaded)))
+        self.away = -twin.relays[0].normal * AWAY_M  # behind the wall, where nothing reaches the footprint
 
-    def _transient(self, vertices: np.ndarray, seed: int) -> np.ndarray:
-        self.params[VERTICES] = self.mi.Float(np.asarray(vertices, np.float32).ravel())
-        self.params.update()
-        integrator = self.scene.integrator()
-        _, transient = integrator.render(self.scene, self.scene.sensors()[0], seed=seed, spp=self.spp)
+    def _transient(self, zone: int, vertices: np.ndarray, seed: int) -> np.ndarray:
+        scene, params = self.scenes[zone]
+        params[VERTICES] = self.mi.Float(np.asarray(vertices, np.float32).ravel())
+        params.update()
+        _, transient = scene.integrator().render(scene, scene.sensors()[0], seed=seed, spp=self.spp)
         return np.asarray(transient, dtype=np.float64).mean(axis=-1)  # (H, W, T, RGB) -> (H, W, T)
 
     def render(self, location: int) -> np.ndarray:
-        seed = derive_seed(self.seed, location) % 2**32
+        """(zones, film, film, N_BINS): every relay patch's pixels at `location`."""
         vertices = self.twin.poses[location].apply(self.twin.vertices)
-        out = self._transient(vertices, seed)
-        if self.twin.tables:
-            out = out - self._transient(vertices + self.away, seed)
-        return out
+        out = []
+        for zone in range(len(self.scenes)):
+            seed = derive_seed(self.seed, location, zone) % 2**32
+            h = self._transient(zone, vertices, seed)
+            if self.twin.tables:
+                h = h - self._transient(zone, vertices + self.away, seed)
+            out.append(h)
+        return np.stack(out)

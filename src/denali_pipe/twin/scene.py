@@ -4,12 +4,18 @@ camera's RGB view (Fig 18).
 Functions take the `mitsuba` module returned by `variant.load_mitsuba`, so
 nothing here imports drjit at module import time.
 
-Transient scene (`transient_scene`), per mitransient's NLOS set-up:
-- `relay`: a rectangle over the footprint patch (or the whole wall), a
-  Lambertian BSDF and the `nlos_capture_meter` sensor with a
-  `transient_hdr_film` of film x film pixels, 128 bins of BIN_WIDTH_OPL from
-  HIST_START_OPL (the real data's time axis);
-- `object`: the wall-facing face as a triangle mesh. Its vertex buffer is
+Transient scene (`transient_scene`), per mitransient's NLOS set-up, one
+per relay patch (a zone's footprint, or the whole wall):
+- `relay`: a rectangle over the patch, a Lambertian BSDF and the
+  `nlos_capture_meter` sensor with a `transient_hdr_film` of film x film
+  pixels, 128 bins of BIN_WIDTH_OPL from HIST_START_OPL less the twin's
+  time offset (the real data's time axis);
+- `spot`: a SPOT_PATCH_M square of wall around the laser spot, SPOT_BEHIND_M
+  behind the wall plane, for the laser to land on where the patch does not
+  hold the spot (an off-centre zone): mitransient needs the laser to hit
+  the scene, and a path through it to the object needs only its spot;
+- `object`: the wall-facing face as a triangle mesh, `diffuse` or the
+  `retroreflective_bsdf` plugin (`twin.bsdf`). Its vertex buffer is
   moved between locations through `mi.traverse` (a mesh keeps the compiled
   kernel; rectangles would recompile per pose);
 - `table0`, `table1`: the table tops, when the twin has them;
@@ -30,6 +36,8 @@ from denali_pipe.rig.frames import FLOOR_Z, TAG_BLACK, TAG_WHITE, tag_texture
 from denali_pipe.twin.layout import Calibration, TwinScene
 
 LASER_FOV_DEG = 0.2  # the reference twin's laser cone
+SPOT_PATCH_M = 0.02  # side of the wall square the laser lands on (its 0.2 deg cone is ~2 mm across there)
+SPOT_BEHIND_M = 1e-4  # behind the wall plane, so that a relay patch holding the spot takes the laser itself
 PROJECTOR_INTENSITY_PER_IRRADIANCE = np.pi  # Mitsuba projector: on-axis W/sr per unit `irradiance`
 # Integrator settings shared by every transient render: laser and hidden-geometry
 # sampling (the NLOS estimators), box time filter, sensor-relative path lengths.
@@ -80,21 +88,24 @@ def triangle_mesh(mi: ModuleType, name: str, vertices: np.ndarray, faces: np.nda
     return mesh
 
 
-def transient_scene(mi: ModuleType, twin: TwinScene, max_depth: int, integrator: str, location: int) -> dict:
+def transient_scene(mi: ModuleType, twin: TwinScene, relay: Rect, max_depth: int, integrator: str, location: int) -> dict:
     """The transient scene dict with the object at `location`.
 
     integrator: the registered integrator type (`transient_nlos_path`, or the
-    table-safe subclass of `twin.mitransient`)."""
-    relay = twin.relay
+    table-safe subclass of `twin.mitransient`); relay: the patch of the
+    film (one of `twin.relays`)."""
+    from denali_pipe.twin.bsdf import object_bsdf
+
     film = {
         "type": "transient_hdr_film",
         "width": twin.film,
         "height": twin.film,
         "temporal_bins": geo.N_BINS,
         "bin_width_opl": geo.BIN_WIDTH_OPL,
-        "start_opl": geo.HIST_START_OPL,
+        "start_opl": geo.HIST_START_OPL - twin.time_offset_opl,
         "rfilter": {"type": "box"},
     }
+    spot = Rect(twin.spot - SPOT_BEHIND_M * relay.normal, relay.u, relay.v, (SPOT_PATCH_M, SPOT_PATCH_M))
     scene = {
         "type": "scene",
         "integrator": {"type": integrator, "max_depth": int(max_depth), **NLOS_INTEGRATOR},
@@ -109,7 +120,8 @@ def transient_scene(mi: ModuleType, twin: TwinScene, max_depth: int, integrator:
                 "film": film,
             },
         },
-        "object": triangle_mesh(mi, "object", twin.poses[location].apply(twin.vertices), twin.faces, diffuse(twin.object_albedo)),
+        "spot": {"type": "rectangle", "to_world": rect_transform(mi, spot), "bsdf": diffuse(twin.wall_albedo)},
+        "object": triangle_mesh(mi, "object", twin.poses[location].apply(twin.vertices), twin.faces, object_bsdf(mi, twin.material)),
         "laser": {
             "type": "projector",
             "irradiance": 1.0 / PROJECTOR_INTENSITY_PER_IRRADIANCE,

@@ -1,0 +1,409 @@
+"""Calibration of the twin from the captures (`denali twin-calibration`):
+what the paper set by hand, fitted by least squares.
+
+Parameters (`PARAMETERS`):
+- per zone of the 3x3 grid, its footprint's centre offset on the wall
+  (offset_u, offset_v, m along the wall's u and v) and its size scale (the
+  zone's iFoV against the design FoV's ninth);
+- a global time offset (bins, added to every path: the captures' time zero
+  against the twin's);
+- with `twin.material: retroreflective`, the object's lobe width (deg) and
+  diffuse share.
+Nuisances, fitted beside them but not part of the twin: each zone's gain
+(counts per unit of the twin's radiance: the sensor's illumination and
+response pattern, solved in closed form at every step) and the pulse's
+Gaussian width (bins; the transforms model the pulse).
+
+The model of zone z of capture i is gain_z * (k * h_iz)[b], h the analytic
+twin (tent filter, `twin.calibration` film and samples) of the zone's
+footprint, k a Gaussian of mean time_offset and sd pulse_sd bins. The data
+are the background-subtracted 3x3 light-on captures of the training split
+(`transforms.split_pairs`: the Fig 9 test captures are never read), mean
+over repeats, each zone weighted by its noise (the repeats' pooled
+variance of the mean). A share `validation_fraction` of the training
+captures is held out of the fit: each zone's residual on them before
+(the design twin, with its gains and pulse fitted) and after calibration
+says what the fit bought. Uncertainties: `bootstrap_resamples` refits on
+captures drawn with replacement, started from the fit, as transforms.json's.
+
+The 8x8 grid's footprints follow from the 3x3 fit: an affine map of the
+zone centres on the wall (nominal -> fitted, least squares over the 9
+zones) and the zones' mean size scale (64 zones are too many to fit from
+captures with 8x8's few photons).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import least_squares
+
+from denali_pipe import geometry as geo
+from denali_pipe.atomic import atomic_file
+from denali_pipe.meshes import object_mesh
+from denali_pipe.objects import ObjectSpec
+from denali_pipe.twin.analytic import AnalyticRenderer
+from denali_pipe.twin.layout import Calibration, Material, TwinScene, ZoneGeometry, material_of, twin_scene, zone_footprints
+
+log = logging.getLogger(__name__)
+
+GRID = 3  # the grid the captures calibrate
+ZONES = GRID * GRID
+CALIBRATION_VERSION = 1
+PULSE_HALF = 10  # the pulse kernel spans +-PULSE_HALF bins about its mean
+PARAMETERS = ("offset_u", "offset_v", "scale", "time_offset", "lobe_width_deg", "diffuse_share")
+# Finite-difference steps of the Jacobian, in the fit's own coordinates (see `_unpack`).
+STEP = 1e-3
+# Bounds of the fit's coordinates: offsets within +-10 cm, scales 0.3-3x, time offset +-20 bins,
+# pulse sd 0.3-15 bins, lobe 0.5-60 deg.
+OFFSET_CM_BOUND = 10.0
+
+
+@dataclass(frozen=True)
+class Fitted:
+    """A calibration: offsets (3, 3, 2) m, scales (3, 3), time_offset
+    (bins), pulse_sd (bins), gains (3, 3) counts per radiance, material."""
+
+    offsets: np.ndarray
+    scales: np.ndarray
+    time_offset: float
+    pulse_sd: float
+    gains: np.ndarray
+    material: Material
+
+    def zones(self, cal: Calibration, n: int) -> ZoneGeometry:
+        """The footprints of an n x n grid: the fit itself for 3x3, its affine
+        map of zone centres and mean scale for others."""
+        if n == GRID:
+            return ZoneGeometry(self.offsets, self.scales)
+        centres = np.array([[(r.centre - cal.wall.centre) @ cal.wall.u, (r.centre - cal.wall.centre) @ cal.wall.v] for r in zone_footprints(cal, GRID)])
+        design = np.c_[centres, np.ones(ZONES)]
+        affine, *_ = np.linalg.lstsq(design, centres + self.offsets.reshape(-1, 2), rcond=None)
+        target = np.array([[(r.centre - cal.wall.centre) @ cal.wall.u, (r.centre - cal.wall.centre) @ cal.wall.v] for r in zone_footprints(cal, n)])
+        moved = np.c_[target, np.ones(len(target))] @ affine
+        return ZoneGeometry((moved - target).reshape(n, n, 2), np.full((n, n), float(self.scales.mean())))
+
+    def twin_scene(self, cal: Calibration, mesh, settings: dict, n: int, spec: ObjectSpec) -> TwinScene:
+        """The calibrated twin of `mesh` on the n x n grid (non-RR objects stay Lambertian)."""
+        rr = spec.material == "retroreflective"
+        material = self.material if rr else material_of(settings, False)
+        return twin_scene(cal, mesh, settings, n, zones=self.zones(cal, n), material=material, time_offset_opl=self.time_offset * geo.BIN_WIDTH_OPL)
+
+
+# --- the data ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Captures:
+    """Real 3x3 captures: real (N, R, 3, 3, T) background-subtracted counts
+    of bins crop_start .. crop_start + T - 1; keys (N rows: set, object,
+    size, location)."""
+
+    real: np.ndarray
+    keys: pd.DataFrame
+    crop_start: int
+
+    def subset(self, rows) -> Captures:
+        return Captures(self.real[rows], self.keys.iloc[rows].reset_index(drop=True), self.crop_start)
+
+
+# --- the model --------------------------------------------------------------------------
+
+
+def pulse(time_offset: float, sd: float) -> np.ndarray:
+    """(2 PULSE_HALF + 1,) Gaussian kernel of mean `time_offset` and sd `sd`
+    bins, summing to one; tap j weighs a delay of j - PULSE_HALF bins."""
+    d = np.arange(-PULSE_HALF, PULSE_HALF + 1)
+    k = np.exp(-((d - time_offset) ** 2) / (2 * sd**2))
+    return k / k.sum()
+
+
+def delay(h: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """Convolve (..., B) with `pulse`'s kernel along the last axis (same length, zero padded)."""
+    flat = h.reshape(-1, h.shape[-1])
+    out = np.stack([np.convolve(row, kernel, mode="same") for row in flat])
+    return out.reshape(h.shape)
+
+
+class Model:
+    """The analytic twins of a set of captures, zone by zone, under changing
+    parameters. specs: {object name: ObjectSpec}; settings: the `twin`
+    section (its `calibration` part: film, samples)."""
+
+    def __init__(self, cal: Calibration, specs: dict, keys: pd.DataFrame, settings: dict):
+        self.cal, self.settings, self.keys = cal, settings, keys
+        c = settings["calibration"]
+        self.renderers, self.terms = {}, []
+        for (name, size), _ in keys.groupby(["object", "size"], sort=False):
+            mesh = object_mesh(specs[name], size)
+            tw = twin_scene(cal, mesh, {**settings, "footprint": {**settings["footprint"], "film": c["film"]}}, GRID)
+            self.renderers[(name, size)] = AnalyticRenderer(tw, c["samples"], "tent")
+        for name, size, location in zip(keys["object"], keys["size"], keys["location"]):
+            self.terms.append(((name, size), int(location), self.renderers[(name, size)].object_terms(int(location))))
+
+    def zone(self, z: int, zones: ZoneGeometry, material: Material) -> np.ndarray:
+        """(N, N_BINS) zone z's twin (mean over its film) for every capture."""
+        rect = zone_footprints(self.cal, GRID, zones)[z]
+        out = []
+        for key, location, terms in self.terms:
+            r = self.renderers[key]
+            r.set_relays([rect])
+            out.append(r.render(location, material, terms)[0].mean(axis=(0, 1)))
+        return np.array(out)
+
+
+# --- the fit ----------------------------------------------------------------------------
+
+
+def _rr(settings: dict) -> bool:
+    return settings.get("material", "lambertian") == "retroreflective"
+
+
+def initial(settings: dict) -> np.ndarray:
+    """The design twin in the fit's coordinates: offsets 0 cm, log scale of
+    `footprint.scale`, time offset 0, log pulse sd of `calibration.pulse_sd_bins`,
+    and with a lobe log width and logit diffuse share of `twin.retroreflective`."""
+    x = [*np.zeros(2 * ZONES), *np.full(ZONES, np.log(settings["footprint"]["scale"])), 0.0, np.log(settings["calibration"]["pulse_sd_bins"])]
+    if _rr(settings):
+        lobe = settings["retroreflective"]
+        d = lobe["diffuse_share"]
+        x += [np.log(lobe["lobe_width_deg"]), np.log(d / (1 - d))]
+    return np.array(x, float)
+
+
+def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, float, Material]:
+    """Fit coordinates -> (zone geometry, time offset bins, pulse sd bins, material).
+    Offsets in cm, scales and widths as logs, the diffuse share as a logit: steps of
+    similar effect, and the bounds of the physical parameters hold by construction."""
+    off = x[: 2 * ZONES].reshape(GRID, GRID, 2) / 100
+    scales = np.exp(x[2 * ZONES : 3 * ZONES]).reshape(GRID, GRID)
+    t0, sd = x[3 * ZONES], float(np.exp(x[3 * ZONES + 1]))
+    material = material_of(settings)
+    if _rr(settings):
+        material = Material("retroreflective", material.albedo, float(np.exp(x[3 * ZONES + 2])), float(1 / (1 + np.exp(-x[3 * ZONES + 3]))))
+    return ZoneGeometry(off, scales), float(t0), sd, material
+
+
+def _bounds(settings: dict) -> tuple[np.ndarray, np.ndarray]:
+    lo = [*np.full(2 * ZONES, -OFFSET_CM_BOUND), *np.full(ZONES, np.log(0.3)), -20.0, np.log(0.3)]
+    hi = [*np.full(2 * ZONES, OFFSET_CM_BOUND), *np.full(ZONES, np.log(3.0)), 20.0, np.log(15.0)]
+    if _rr(settings):
+        lo += [np.log(0.5), -6.0]
+        hi += [np.log(60.0), 6.0]
+    return np.array(lo), np.array(hi)
+
+
+class Problem:
+    """Least squares of the twins against real means: y (N, Z, T) repeat
+    means, sigma (Z,) each zone's noise sd of a mean."""
+
+    def __init__(self, model: Model, captures: Captures, settings: dict):
+        self.model, self.settings = model, settings
+        self.crop, self.T = captures.crop_start, captures.real.shape[-1]
+        R = captures.real.shape[1]
+        real = captures.real.reshape(len(captures.real), R, ZONES, self.T).astype(np.float64)
+        self.y = real.mean(axis=1)
+        self.sigma = np.sqrt(real.var(axis=1, ddof=1).mean(axis=(0, 2)) / R) if R > 1 else self.y.std(axis=(0, 2))
+        self.sigma = np.maximum(self.sigma, 1e-9)
+        self.cache: dict = {}
+
+    def zone_twin(self, z: int, zones: ZoneGeometry, material: Material) -> np.ndarray:
+        key = (z, *zones.offsets[divmod(z, GRID)].round(12), round(float(zones.scales[divmod(z, GRID)]), 12), material)
+        if key not in self.cache:
+            if len(self.cache) > 4 * ZONES:
+                self.cache.clear()
+            self.cache[key] = self.model.zone(z, zones, material)
+        return self.cache[key]
+
+    def twins(self, x: np.ndarray) -> np.ndarray:
+        """(N, Z, T) the twins blurred by the pulse, in the real bins (before the gains)."""
+        zones, t0, sd, material = _unpack(x, self.settings)
+        h = np.stack([self.zone_twin(z, zones, material) for z in range(ZONES)], axis=1)
+        return delay(h, pulse(t0, sd))[..., self.crop : self.crop + self.T]
+
+    def gains(self, m: np.ndarray) -> np.ndarray:
+        """(Z,) least-squares gain of each zone's twins m (N, Z, T) against y."""
+        return (m * self.y).sum(axis=(0, 2)) / np.maximum((m * m).sum(axis=(0, 2)), 1e-300)
+
+    def residuals(self, x: np.ndarray, gains: np.ndarray | None = None) -> np.ndarray:
+        """(N, Z, T) noise-weighted residuals, gains fitted unless given."""
+        m = self.twins(x)
+        g = self.gains(m) if gains is None else gains
+        return (self.y - g[None, :, None] * m) / self.sigma[None, :, None]
+
+
+def fit(problem: Problem, x0: np.ndarray, max_nfev: int | None = None) -> np.ndarray:
+    """The least-squares parameters (fit coordinates) from x0 (trust region
+    reflective, bounded; forward-difference Jacobian with STEP)."""
+    lo, hi = _bounds(problem.settings)
+    x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
+    res = least_squares(lambda x: problem.residuals(x).ravel(), x0, bounds=(lo, hi), diff_step=STEP, x_scale=1.0, max_nfev=max_nfev, method="trf")
+    log.info("calibration fit: cost %.4g after %d evaluations (%s)", res.cost, res.nfev, res.message)
+    return res.x
+
+
+def at_bound(x: np.ndarray, settings: dict) -> list[str]:
+    """The fit coordinates pinned at a bound (within 1e-6 of it), by name
+    (per-zone ones as name[row, col]): there the data push past the range the
+    twin's geometry allows, and the bootstrap's spread says nothing."""
+    lo, hi = _bounds(settings)
+    names = [f"offset_{'uv'[i % 2]}[{i // 2 // GRID}, {i // 2 % GRID}]" for i in range(2 * ZONES)]
+    names += [f"scale[{z // GRID}, {z % GRID}]" for z in range(ZONES)] + ["time_offset", "pulse_sd", "lobe_width_deg", "diffuse_share"][: len(x) - 3 * ZONES]
+    return [n for n, v, a, b in zip(names, x, lo, hi) if v - a < 1e-6 or b - v < 1e-6]
+
+
+def to_physical(x: np.ndarray, settings: dict) -> dict:
+    """The fit coordinates as the named physical parameters (`PARAMETERS` and pulse_sd)."""
+    zones, t0, sd, material = _unpack(x, settings)
+    out = {"offset_u": zones.offsets[..., 0], "offset_v": zones.offsets[..., 1], "scale": zones.scales, "time_offset": t0, "pulse_sd": sd}
+    if material.kind == "retroreflective":
+        out |= {"lobe_width_deg": material.lobe_width_deg, "diffuse_share": material.diffuse_share}
+    return out
+
+
+def zone_residuals(problem: Problem, x: np.ndarray, gains: np.ndarray) -> dict:
+    """Per zone (3, 3): nl2 = ||y - g m|| / ||y|| and chi2 = mean squared
+    noise-weighted residual (1: as close as the noise allows)."""
+    r = problem.residuals(x, gains)
+    fit_m = problem.y - r * problem.sigma[None, :, None]
+    nl2 = np.linalg.norm((problem.y - fit_m).transpose(1, 0, 2).reshape(ZONES, -1), axis=1) / np.linalg.norm(
+        problem.y.transpose(1, 0, 2).reshape(ZONES, -1), axis=1
+    )
+    return {"nl2": nl2.reshape(GRID, GRID).tolist(), "chi2": (r**2).mean(axis=(0, 2)).reshape(GRID, GRID).tolist()}
+
+
+def nuisance_fit(problem: Problem, x: np.ndarray) -> np.ndarray:
+    """x with only the pulse width refitted (the design twin's best showing)."""
+    i = 3 * ZONES + 1
+    lo, hi = _bounds(problem.settings)
+
+    def r(p):
+        y = x.copy()
+        y[i] = p[0]
+        return problem.residuals(y).ravel()
+
+    out = x.copy()
+    out[i] = least_squares(r, [x[i]], bounds=([lo[i]], [hi[i]]), diff_step=STEP).x[0]
+    return out
+
+
+@dataclass(frozen=True)
+class Result:
+    x: np.ndarray
+    gains: np.ndarray
+    before: dict
+    after: dict
+    se: dict
+    interval: dict
+    x_before: np.ndarray
+    gains_before: np.ndarray
+
+
+def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict, seed: int) -> tuple[Result, Problem, Problem]:
+    """Fit the twin on `captures` (the training split's), holding out
+    `calibration.validation_fraction` of them (by capture, seeded) to score
+    the fit. Returns the result and the fit and validation problems."""
+    c = settings["calibration"]
+    n = len(captures.real)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(n)
+    n_val = min(max(int(round(c["validation_fraction"] * n)), 1), n - 2)
+    val, train = np.sort(order[:n_val]), np.sort(order[n_val:])
+    if c["max_captures"] and len(train) > c["max_captures"]:
+        train = np.sort(rng.choice(train, c["max_captures"], replace=False))
+    fit_cap, val_cap = captures.subset(train), captures.subset(val)
+    problem = Problem(Model(cal, specs, fit_cap.keys, settings), fit_cap, settings)
+    held = Problem(Model(cal, specs, val_cap.keys, settings), val_cap, settings)
+    x0 = initial(settings)
+    x_before = nuisance_fit(problem, x0)
+    gains_before = problem.gains(problem.twins(x_before))
+    x = fit(problem, x_before)
+    gains = problem.gains(problem.twins(x))
+    phys = to_physical(x, settings)
+    boots = []
+    for b in range(c["bootstrap_resamples"]):
+        rows = rng.integers(0, len(train), len(train))
+        sub = Problem(problem.model, fit_cap, settings)
+        sub.y, sub.cache = problem.y[rows], {}
+        sub.model = _Rows(problem.model, rows)
+        boots.append(to_physical(fit(sub, x, max_nfev=c["bootstrap_max_nfev"]), settings))
+        log.info("calibration bootstrap %d/%d", b + 1, c["bootstrap_resamples"])
+    level = c["level"]
+    tails = (50 * (1 - level), 50 * (1 + level))
+    se = {k: np.std([np.asarray(bt[k]) for bt in boots], axis=0, ddof=1).tolist() for k in phys}
+    interval = {k: np.moveaxis(np.percentile([np.asarray(bt[k]) for bt in boots], tails, axis=0), 0, -1).tolist() for k in phys}
+    result = Result(x, gains, zone_residuals(held, x_before, gains_before), zone_residuals(held, x, gains), se, interval, x_before, gains_before)
+    return result, problem, held
+
+
+class _Rows:
+    """A Model restricted to some of its captures (rows, with repeats): the bootstrap's."""
+
+    def __init__(self, model: Model, rows: np.ndarray):
+        self.model, self.rows = model, rows
+
+    def zone(self, z, zones, material):
+        return self.model.zone(z, zones, material)[self.rows]
+
+
+# --- the file ---------------------------------------------------------------------------
+
+
+def write_calibration(path: Path, result: Result, settings: dict, record: dict) -> None:
+    """twin_calibration.json: the parameters (physical units), their
+    bootstrap standard errors and intervals, the gains, the held-out
+    residuals before and after, and `record`."""
+    phys = to_physical(result.x, settings)
+    body = {
+        "denali_twin_calibration": CALIBRATION_VERSION,
+        "grid": f"{GRID}x{GRID}",
+        "material": material_of(settings).kind,
+        "object_albedo": float(settings["object_albedo"]),
+        "parameters": {k: np.asarray(v).tolist() for k, v in phys.items()},
+        "units": {
+            "offset_u": "m",
+            "offset_v": "m",
+            "scale": "x design",
+            "time_offset": "bins",
+            "pulse_sd": "bins",
+            "lobe_width_deg": "deg",
+            "diffuse_share": "1",
+        },
+        "se": result.se,
+        "interval": result.interval,
+        "gains": result.gains.reshape(GRID, GRID).tolist(),
+        "before": {
+            "parameters": {k: np.asarray(v).tolist() for k, v in to_physical(result.x_before, settings).items()},
+            "gains": result.gains_before.reshape(GRID, GRID).tolist(),
+        },
+        "residual": {"before": result.before, "after": result.after},
+        "at_bound": at_bound(result.x, settings),
+        **record,
+    }
+    with atomic_file(Path(path)) as tmp:
+        tmp.write_text(json.dumps(body, indent=1) + "\n")
+
+
+def read_calibration(path: Path) -> Fitted:
+    """twin_calibration.json -> Fitted; ValueError naming the file when it is not one."""
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text())
+        if d.get("denali_twin_calibration") != CALIBRATION_VERSION:
+            raise ValueError(f"version {d.get('denali_twin_calibration')!r}, expected {CALIBRATION_VERSION}")
+        p = d["parameters"]
+        offsets = np.stack([np.asarray(p["offset_u"], float), np.asarray(p["offset_v"], float)], axis=-1)
+        settings = {
+            "material": d["material"],
+            "object_albedo": d["object_albedo"],
+            "retroreflective": {k: p.get(k) for k in ("lobe_width_deg", "diffuse_share")},
+        }
+        material = material_of(settings)
+        return Fitted(offsets, np.asarray(p["scale"], float), float(p["time_offset"]), float(p["pulse_sd"]), np.asarray(d["gains"], float), material)
+    except (OSError, KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"{path}: not a twin calibration ({type(e).__name__}: {e})") from None

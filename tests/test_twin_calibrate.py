@@ -1,0 +1,142 @@
+"""The twin's calibration: parameters planted in synthetic captures made by
+the twin itself come back within their bootstrap uncertainties, the held-out
+residual falls, and the file round-trips into calibrated twins."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from denali_pipe.twin import calibrate as C
+from denali_pipe.twin.layout import ZoneGeometry, load_calibration, nominal_scene, zone_footprints
+
+LOCATIONS = list(range(0, 100, 7))
+CROP, T, R = 60, 60, 3
+SETTINGS = {
+    "wall_albedo": 1.0, "object_albedo": 0.5, "table": False, "table_albedo": 0.5,
+    "material": "retroreflective", "retroreflective": {"lobe_width_deg": 10.0, "diffuse_share": 0.3},
+    "footprint": {"film": 8, "scale": 1.0},
+    "calibration": {
+        "film": 2, "samples": 10, "pulse_sd_bins": 3.0, "validation_fraction": 0.2, "max_captures": 0,
+        "bootstrap_resamples": 6, "bootstrap_max_nfev": 20, "level": 0.9,
+    },
+}  # fmt: skip
+GLOBALS = ("time_offset", "pulse_sd", "lobe_width_deg", "diffuse_share")
+
+
+@pytest.fixture(scope="module")
+def cal(tmp_path_factory):
+    path = tmp_path_factory.mktemp("scene") / "scene.json"
+    path.write_text(json.dumps(nominal_scene(LOCATIONS)))
+    return load_calibration(path)
+
+
+@pytest.fixture(scope="module")
+def planted(cal, catalogue):
+    """Captures drawn from the twin at known parameters: (truth, captures, specs)."""
+    specs = {k: catalogue[k] for k in ("A", "circle")}
+    keys = pd.DataFrame(
+        [(f"{o}_{s}_3x3_lighton", o, s, loc) for o, s in (("A", "8inch"), ("circle", "4inch")) for loc in LOCATIONS],
+        columns=["set", "object", "size", "location"],
+    )
+    rng = np.random.default_rng(1)
+    truth = C.initial(SETTINGS)
+    truth[:18] = rng.uniform(-1.5, 1.5, 18)  # cm
+    truth[18:27] = np.log(rng.uniform(0.9, 1.15, 9))
+    truth[27:] = [1.7, np.log(2.5), np.log(14.0), np.log(0.4 / 0.6)]
+    dummy = C.Captures(np.zeros((len(keys), R, 3, 3, T), np.float32), keys, CROP)
+    m = C.Problem(C.Model(cal, specs, keys, SETTINGS), dummy, SETTINGS).twins(truth)
+    mean = rng.uniform(0.5, 2, 9)[None, :, None] * m * 1e3 / m.max()
+    real = mean[:, None] + rng.normal(0, 0.005 * mean.max(), (len(keys), R, 9, T))
+    return truth, C.Captures(real.reshape(len(keys), R, 3, 3, T).astype(np.float32), keys, CROP), specs
+
+
+@pytest.fixture(scope="module")
+def fitted(cal, planted):
+    truth, captures, specs = planted
+    return C.calibrate(cal, specs, captures, SETTINGS, seed=0)
+
+
+def test_planted_parameters_come_back(planted, fitted):
+    truth, _, _ = planted
+    result, _, _ = fitted
+    want, got = C.to_physical(truth, SETTINGS), C.to_physical(result.x, SETTINGS)
+    for k in GLOBALS:
+        se = float(np.asarray(result.se[k]))
+        assert 0 < se and abs(got[k] - want[k]) <= 4 * se + 1e-3 * abs(want[k]), (k, got[k], want[k], se)
+    # the zones' footprints: each within 4 standard errors, but for a few
+    # that trade centre against size along the object's path (weakly identified)
+    hits = [np.abs(np.asarray(got[k]) - want[k]) <= 4 * np.asarray(result.se[k]) + 1e-3 for k in ("offset_u", "offset_v", "scale")]
+    assert np.mean(hits) >= 0.8, hits
+
+
+def test_held_out_residual_falls_in_every_zone(fitted):
+    result, _, held = fitted
+    before, after = np.array(result.before["nl2"]), np.array(result.after["nl2"])
+    assert (after < before).all() and (after < 0.2).all()
+    # as close as the noise allows: held-out chi2 per zone near 1
+    assert (np.array(result.after["chi2"]) < 1.5).all()
+
+
+def test_the_fit_never_sees_held_out_captures(planted, fitted):
+    _, captures, _ = planted
+    _, problem, held = fitted
+    fit_keys = set(map(tuple, problem.model.keys[["set", "location"]].values))
+    held_keys = set(map(tuple, held.model.keys[["set", "location"]].values))
+    assert fit_keys and held_keys and not fit_keys & held_keys and len(fit_keys | held_keys) == len(captures.keys)
+
+
+def test_file_round_trips_into_calibrated_twins(cal, catalogue, fitted, tmp_path):
+    result, _, _ = fitted
+    path = tmp_path / "twin_calibration.json"
+    C.write_calibration(path, result, SETTINGS, {"n_captures": 1})
+    f = C.read_calibration(path)
+    phys = C.to_physical(result.x, SETTINGS)
+    assert np.allclose(f.offsets[..., 0], phys["offset_u"]) and np.allclose(f.scales, phys["scale"])
+    assert f.material.lobe_width_deg == pytest.approx(phys["lobe_width_deg"]) and f.time_offset == pytest.approx(phys["time_offset"])
+    doc = json.loads(path.read_text())
+    assert set(doc["se"]) == set(doc["parameters"]) and np.shape(doc["interval"]["scale"]) == (3, 3, 2)
+    # the calibrated twin: its 3x3 footprints are the fit's, a non-RR object stays Lambertian
+    tw = f.twin_scene(cal, _mesh(catalogue), SETTINGS, 3, catalogue["generalization1white"])
+    assert tw.material.kind == "lambertian" and tw.time_offset_opl > 0
+    assert np.allclose(tw.relays[2].size, zone_footprints(cal, 3, ZoneGeometry(f.offsets, f.scales))[2].size)
+    with pytest.raises(ValueError, match="not a twin calibration"):
+        C.read_calibration(tmp_path / "missing.json")
+
+
+def _mesh(catalogue):
+    from denali_pipe.meshes import object_mesh
+
+    return object_mesh(catalogue["A"], "8inch")
+
+
+def test_8x8_follows_the_3x3_fit(cal):
+    """A shift common to the 3x3 zones moves every 8x8 zone by it; their scale is the mean."""
+    offsets = np.zeros((3, 3, 2))
+    offsets[..., 0], offsets[..., 1] = 0.012, -0.004
+    scales = np.linspace(0.9, 1.1, 9).reshape(3, 3)
+    from denali_pipe.twin.layout import Material
+
+    f = C.Fitted(offsets, scales, 0.0, 2.0, np.ones((3, 3)), Material("lambertian", 0.5))
+    z8 = f.zones(cal, 8)
+    assert np.allclose(z8.offsets[..., 0], 0.012, atol=1e-9) and np.allclose(z8.offsets[..., 1], -0.004, atol=1e-9)
+    assert np.allclose(z8.scales, 1.0)
+
+
+def test_pulse_is_a_normalised_delayed_gaussian():
+    k = C.pulse(1.5, 2.0)
+    d = np.arange(-C.PULSE_HALF, C.PULSE_HALF + 1)
+    assert k.sum() == pytest.approx(1.0) and (k * d).sum() == pytest.approx(1.5, abs=1e-3)
+    h = np.zeros(40)
+    h[20] = 1.0
+    assert np.argmax(C.delay(h, C.pulse(3.0, 0.5))) == 23
+
+
+def test_at_bound_names_the_pinned_coordinates():
+    x = C.initial(SETTINGS)
+    x[0], x[3], x[20], x[27] = C.OFFSET_CM_BOUND, -C.OFFSET_CM_BOUND, np.log(3.0), -20.0
+    assert C.at_bound(x, SETTINGS) == ["offset_u[0, 0]", "offset_v[0, 1]", "scale[0, 2]", "time_offset"]
+    assert C.at_bound(C.initial(SETTINGS), SETTINGS) == []
