@@ -17,8 +17,10 @@ TINY = "config/presets/tiny.yaml"
 
 def test_target_files_expand_the_twins_per_pair():
     files = target_files([("A", "4inch"), ("1", "8inch")])
-    assert [f for f in files if f.startswith("results/twin/")] == ["results/twin/A_4inch.zarr", "results/twin/1_8inch.zarr"]
-    assert [f for f in files if not f.startswith("results/twin/")] == [t.path for t in TARGETS if "{object}" not in t.path]
+    per_pair = ("results/twin/", "results/twin_calibrated/")
+    for folder in per_pair:
+        assert [f for f in files if f.startswith(folder)] == [f"{folder}A_4inch.zarr", f"{folder}1_8inch.zarr"]
+    assert [f for f in files if not f.startswith(per_pair)] == [t.path for t in TARGETS if "{object}" not in t.path]
 
 
 def test_every_artefact_has_one_file():

@@ -405,8 +405,8 @@ def test_mode_follows_the_held_out_residual():
     rng = np.random.default_rng(3)
     gains = np.linspace(0.4, 2.6, ZONES)
     pairs = zone_pairs(gains, rng)
-    mode, residual = choose_mode(pairs, 42, 0.3)
-    assert mode == "per_zone" and residual["per_zone"] < 0.5 * residual["shared"]
+    mode, residual, rejected = choose_mode(pairs, 42, 0.3)
+    assert mode == "per_zone" and residual["per_zone"] < 0.5 * residual["shared"] and not rejected
     zt = fit_zone_transforms(pairs, mode)
     assert np.allclose([t.a for t in zt.zones], gains * 1e4, rtol=0.1)
     shared = fit_zone_transforms(pairs, "shared")
@@ -414,3 +414,19 @@ def test_mode_follows_the_held_out_residual():
     # apply: each row through its own zone's transforms
     h = zt.apply(pairs.sim[:ZONES], np.arange(ZONES), "scaled")
     assert np.allclose(h, np.array([scale(pairs.sim[z], zt.zones[z].a, zt.zones[z].gamma) for z in range(ZONES)]))
+
+
+def test_a_zone_without_object_signal_rejects_per_zone_transforms():
+    """A zone whose captures hold no object signal (its twin anti-correlates
+    with the real counts) has no per-zone scale: the per-zone mode is rejected,
+    naming the zone, and the shared one, fitted on every zone at once, is used."""
+    rng = np.random.default_rng(4)
+    gains = np.full(ZONES, 1.0)
+    pairs = zone_pairs(gains, rng)
+    dead = pairs.keys["zone"].to_numpy() == 0
+    # over-subtracted background: the counts dip where the twin peaks
+    pairs.real[dead] = -0.1 * pairs.real[dead]
+    mode, residual, rejected = choose_mode(pairs, 42, 0.3)
+    assert mode == "shared" and set(residual) == {"shared"} and rejected["per_zone"].startswith("zone 0: ")
+    with pytest.raises(ValueError, match="zone 0: fit_transforms: the best scale is 0"):
+        fit_zone_transforms(pairs, "per_zone")

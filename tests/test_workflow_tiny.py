@@ -402,7 +402,7 @@ def test_twin_calibration(tiny_run):
 
 def test_transforms_and_fig9(tiny_run):
     t = json.loads((tiny_run / "results/transforms.json").read_text())
-    assert t["mode"] in ("shared", "per_zone") and len(t["zones"]) == 9 and set(t["mode_residual"]) == {"shared", "per_zone"}
+    assert t["mode"] in ("shared", "per_zone") and len(t["zones"]) == 9 and set(t["mode_residual"]) | set(t["mode_rejected"]) == {"shared", "per_zone"}
     for z in t["zones"]:
         assert z["a"] > 0 and z["a_noise"] >= 1 and z["b_noise"] >= 0
         assert len(z["kernel"]) == t["kernel_bins"] == 11 and abs(sum(z["kernel"]) - 1) < 1e-6

@@ -560,7 +560,13 @@ def fit_zone_transforms(pairs: Pairs, mode: str) -> ZoneTransforms:
         raise ValueError(f"unknown transforms mode {mode!r}; expected one of {MODES}")
     if mode == "shared":
         return ZoneTransforms(mode, (fit_transforms(pairs),) * ZONES)
-    return ZoneTransforms(mode, tuple(fit_transforms(pairs.zone(z)) for z in range(ZONES)))
+    zones = []
+    for z in range(ZONES):
+        try:
+            zones.append(fit_transforms(pairs.zone(z)))
+        except ValueError as e:
+            raise ValueError(f"zone {z}: {e}") from None
+    return ZoneTransforms(mode, tuple(zones))
 
 
 def mean_residual(pairs: Pairs, zt: ZoneTransforms) -> float:
@@ -571,14 +577,26 @@ def mean_residual(pairs: Pairs, zt: ZoneTransforms) -> float:
     return float(((y - mu) ** 2).sum() / (y**2).sum())
 
 
-def choose_mode(train: Pairs, seed: int, fraction: float) -> tuple[str, dict]:
+def choose_mode(train: Pairs, seed: int, fraction: float) -> tuple[str, dict, dict]:
     """The mode of the lower residual (`mean_residual`) on a share `fraction`
     of the training captures held out of the fits of both modes (by capture,
-    drawn with `seed`). Returns the mode and {mode: residual}."""
+    drawn with `seed`). A mode that cannot be fitted is rejected: per zone,
+    a zone whose captures hold no object signal (a dim corner of the
+    sensor's centre-weighted field) has no scale of its own, and the shared
+    transforms, fitted on every zone at once, still have one. Returns the
+    mode, {mode: residual} of the modes fitted and {mode: why} of those
+    rejected; ValueError when neither mode can be fitted."""
     inner = split_pairs(train.keys, seed, fraction)
     fit_on, held = train.subset(inner.train), train.subset(inner.test)
-    residual = {m: mean_residual(held, fit_zone_transforms(fit_on, m)) for m in MODES}
-    return min(MODES, key=residual.get), residual
+    residual, rejected = {}, {}
+    for m in MODES:
+        try:
+            residual[m] = mean_residual(held, fit_zone_transforms(fit_on, m))
+        except ValueError as e:
+            rejected[m] = str(e)
+    if not residual:
+        raise ValueError(f"choose_mode: no transforms mode can be fitted: {rejected}")
+    return min(residual, key=residual.get), residual, rejected
 
 
 # --- the file ---------------------------------------------------------------------------

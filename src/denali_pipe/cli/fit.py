@@ -29,7 +29,9 @@ def cmd_transforms(args: argparse.Namespace) -> None:
     pairs, split = pairs_and_split(args)
     train = pairs.subset(split.train)
     fit = args.config["fit"]
-    mode, residuals = choose_mode(train, args.config["seed"], fit["mode_validation_fraction"])
+    mode, residuals, rejected = choose_mode(train, args.config["seed"], fit["mode_validation_fraction"])
+    for m, why in rejected.items():
+        log.warning("transforms: mode %s rejected: %s", m, why)
     zt = fit_zone_transforms(train, mode)
     t1 = time.perf_counter()
     boot = fit["bootstrap"]
@@ -40,6 +42,7 @@ def cmd_transforms(args: argparse.Namespace) -> None:
     t2 = time.perf_counter()
     record = {
         "mode_residual": residuals,
+        "mode_rejected": rejected,
         "n_pairs": int(len(split.train)),
         "n_test_pairs": int(len(split.test)),
         "repeats": int(pairs.real.shape[1]),
