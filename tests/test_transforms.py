@@ -357,6 +357,7 @@ def test_transforms_file_round_trip_and_bad_file(tmp_path):
         {**dict.fromkeys(SCALARS, 0.1), "kernel": [0.01] * KERNEL_BINS},
         {**dict.fromkeys(SCALARS, [0.5, 1.5]), "kernel": [[0.0, 0.2]] * KERNEL_BINS},
         0.03,
+        2,
     )
     check = FitCheck(1.5, boot, {"a_noise": 0.3, "b_noise": 2.0}, {"a_noise": "standard error 25.0% of its value (more than 10.0%)"})
     zt = ZoneTransforms("per_zone", tuple(Transforms(3.0 + z, 0.9, t.kernel, 1.2, 40.0) for z in range(ZONES)))
@@ -430,3 +431,30 @@ def test_a_zone_without_object_signal_rejects_per_zone_transforms():
     assert mode == "shared" and set(residual) == {"shared"} and rejected["per_zone"].startswith("zone 0: ")
     with pytest.raises(ValueError, match="zone 0: fit_transforms: the best scale is 0"):
         fit_zone_transforms(pairs, "per_zone")
+
+
+def test_refits_without_a_scale_are_counted_and_leave_the_scale_unidentified(monkeypatch):
+    """A resample of weak captures may hold no object signal (fit_transforms
+    raises): such refits are counted, not fatal, and flag the scale; with
+    fewer than two refits left there is nothing to judge, which is an error."""
+    from denali_pipe import transforms as tr
+
+    pairs = zone_pairs(np.full(ZONES, 1.0), np.random.default_rng(5), n=10).zone(0)
+    t = fit_transforms(pairs)
+    calls = iter(range(10**6))
+
+    def every_third_fails(p):
+        if next(calls) % 3 == 0:
+            raise ValueError("fit_transforms: the best scale is 0")
+        return fit_transforms(p)
+
+    monkeypatch.setattr(tr, "fit_transforms", every_third_fails)
+    check = check_fit(pairs, t, 30, 42, 0.9, 0.1)
+    assert check.bootstrap.failed == 10 and check.unidentified["a"] == "10 of 30 refits found no positive scale"
+
+    def always_fails(p):
+        raise ValueError("fit_transforms: the best scale is 0")
+
+    monkeypatch.setattr(tr, "fit_transforms", always_fails)
+    with pytest.raises(ValueError, match="30 of 30 refits found no positive scale"):
+        check_fit(pairs, t, 30, 42, 0.9, 0.1)

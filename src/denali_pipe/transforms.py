@@ -419,7 +419,8 @@ class Bootstrap:
     SCALARS (a float) and of each kernel tap ("kernel": a list);
     interval: the percentile interval of coverage `level`, [low, high] per
     parameter (per tap for the kernel); kernel_l1: the mean L1 distance of
-    the refits' kernels from the fitted kernel."""
+    the refits' kernels from the fitted kernel; failed: the refits that found
+    no positive scale (left out of se and interval)."""
 
     resamples: int
     seed: int
@@ -427,6 +428,7 @@ class Bootstrap:
     se: dict
     interval: dict
     kernel_l1: float
+    failed: int
 
 
 @dataclass(frozen=True)
@@ -470,7 +472,16 @@ def bootstrap(pairs: Pairs, t: Transforms, resamples: int, seed: int, level: flo
         raise ValueError(f"bootstrap: needs >= 2 resamples and a level in (0, 1), got {resamples} and {level}")
     rng = np.random.default_rng(seed)
     n = len(pairs.real)
-    fits = [fit_transforms(pairs.subset(rng.integers(0, n, n))) for _ in range(resamples)]
+    fits = []
+    for _ in range(resamples):
+        # a resample of weak captures may hold no object signal at all: that
+        # refit has no scale, which says the captures barely pin the fit down
+        try:
+            fits.append(fit_transforms(pairs.subset(rng.integers(0, n, n))))
+        except ValueError:
+            continue
+    if len(fits) < 2:
+        raise ValueError(f"bootstrap: {resamples - len(fits)} of {resamples} refits found no positive scale; the captures do not identify the transforms")
     values = {p: np.array([getattr(f, p) for f in fits]) for p in (*SCALARS, "kernel")}
     tails = (50 * (1 - level), 50 * (1 + level))  # percentiles
     return Bootstrap(
@@ -480,6 +491,7 @@ def bootstrap(pairs: Pairs, t: Transforms, resamples: int, seed: int, level: flo
         {p: v.std(axis=0, ddof=1).tolist() for p, v in values.items()},
         {p: np.percentile(v, tails, axis=0).T.tolist() for p, v in values.items()},
         float(np.abs(values["kernel"] - np.array(t.kernel)).sum(axis=1).mean()),
+        resamples - len(fits),
     )
 
 
@@ -525,6 +537,8 @@ def check_fit(pairs: Pairs, t: Transforms, resamples: int, seed: int, level: flo
         rel = se / value if value > 0 else (0.0 if se == 0 else np.inf)
         if rel > max_rel_se and p not in unidentified:
             unidentified[p] = f"standard error {rel:.1%} of its value (more than {max_rel_se:.1%})"
+    if boot.failed:
+        unidentified["a"] = f"{boot.failed} of {boot.resamples} refits found no positive scale"
     if boot.kernel_l1 > max_rel_se:
         unidentified["kernel"] = f"the bootstrap's kernels lie {boot.kernel_l1:.3f} from it (mean L1, more than {max_rel_se})"
     check = FitCheck(peak_snr(pairs, t), boot, noise_se, unidentified)
@@ -648,7 +662,9 @@ def read_fit_check(path: Path) -> list[FitCheck]:
     for z in zones:
         try:
             c, b = z["check"], z["check"]["bootstrap"]
-            boot = Bootstrap(int(b["resamples"]), int(b["seed"]), float(b["level"]), dict(b["se"]), dict(b["interval"]), float(b["kernel_l1"]))
+            boot = Bootstrap(
+                int(b["resamples"]), int(b["seed"]), float(b["level"]), dict(b["se"]), dict(b["interval"]), float(b["kernel_l1"]), int(b["failed"])
+            )
             noise_se = None if c["noise_se"] is None else {p: float(c["noise_se"][p]) for p in ("a_noise", "b_noise")}
             out.append(FitCheck(float(c["peak_snr"]), boot, noise_se, dict(c["unidentified"])))
         except (KeyError, TypeError, ValueError) as e:
