@@ -13,6 +13,7 @@ log = logging.getLogger("denali")
 def cmd_check_release(args: argparse.Namespace) -> None:
     import yaml
 
+    from denali_pipe.atomic import atomic_file
     from denali_pipe.capture_sets import expected_sets, select_sets
     from denali_pipe.io.tree import survey_tree
     from denali_pipe.objects import load_catalogue
@@ -28,7 +29,8 @@ def cmd_check_release(args: argparse.Namespace) -> None:
         if not usable:
             raise ValueError(f"{args.raw_dir}: no configured set is here whole: nothing to write to {args.write_sets}")
         header = f"# The {len(usable)} capture sets of {args.raw_dir} found whole by `denali check-release`\n"
-        Path(args.write_sets).write_text(header + yaml.safe_dump({"sets": usable}))
+        with atomic_file(Path(args.write_sets)) as tmp:
+            tmp.write_text(header + yaml.safe_dump({"sets": usable}))
         log.info("wrote %s: add it after the preset's --configfile to run on these %d sets", args.write_sets, len(usable))
     if not survey.complete:
         raise ValueError(f"{args.raw_dir}: the capture tree does not hold every configured set whole (listed above)")
