@@ -4,16 +4,6 @@
 
 # Fig 9's settings (the whole fit section: the split it shares with the fit).
 FIG9_JOB_CONFIG = json.dumps({"seed": config["seed"], "fit": FIT}, sort_keys=True)
-# Fig 9 trains the paper's 1D CNN (on the centre zone: experiments/fig9.py)
-# whatever train.benchmark_model says; its optimiser settings are
-# train.models.cnn1d's location ones, its epochs Fig 9's own.
-FIG9_MODEL = "cnn1d"
-
-
-def fig9_hyper(wildcards):
-    if FIG9_MODEL not in MODELS:
-        raise ValueError(f"Fig 9 trains the 1D CNN with the settings of train.models.{FIG9_MODEL}, which the config leaves out")
-    return json.dumps({**MODELS[FIG9_MODEL]["location"], "epochs": FIT["fig9"]["epochs"]}, sort_keys=True)
 
 
 rule fig9:
