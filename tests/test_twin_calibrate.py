@@ -5,6 +5,7 @@ residual falls, and the file round-trips into calibrated twins."""
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -145,3 +146,11 @@ def test_at_bound_names_the_pinned_coordinates():
     x[0], x[3], x[20], x[27] = C.OFFSET_CM_BOUND, -C.OFFSET_CM_BOUND, np.log(3.0), -20.0
     assert C.at_bound(x, SETTINGS) == ["offset_u[0, 0]", "offset_v[0, 1]", "scale[0, 2]", "time_offset"]
     assert C.at_bound(C.initial(SETTINGS), SETTINGS) == []
+
+
+def test_gains_are_never_negative():
+    # a zone whose data run against its twin (background residue, no return)
+    # gets no gain rather than an upside-down twin; elsewhere least squares
+    m = np.ones((4, 2, 5))
+    problem = SimpleNamespace(y=np.stack([-m[:, 0], 2 * m[:, 1]], axis=1))
+    assert C.Problem.gains(problem, m).tolist() == [0.0, 2.0]

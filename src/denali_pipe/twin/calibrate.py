@@ -228,8 +228,12 @@ class Problem:
         return delay(h, pulse(t0, sd))[..., self.crop : self.crop + self.T]
 
     def gains(self, m: np.ndarray) -> np.ndarray:
-        """(Z,) least-squares gain of each zone's twins m (N, Z, T) against y."""
-        return (m * self.y).sum(axis=(0, 2)) / np.maximum((m * m).sum(axis=(0, 2)), 1e-300)
+        """(Z,) least-squares gain of each zone's twins m (N, Z, T) against y,
+        non-negative: a zone counts photons. (Unconstrained, a zone whose data
+        hold no return the twin can follow, such as a dim corner's background
+        residue, took a negative gain and an upside-down twin; each zone's
+        gain is a one-dimensional problem, so clipping is its exact NNLS.)"""
+        return np.maximum((m * self.y).sum(axis=(0, 2)) / np.maximum((m * m).sum(axis=(0, 2)), 1e-300), 0.0)
 
     def residuals(self, x: np.ndarray, gains: np.ndarray | None = None) -> np.ndarray:
         """(N, Z, T) noise-weighted residuals, gains fitted unless given."""
