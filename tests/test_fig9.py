@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from denali_pipe import geometry as geo
-from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE, PANELS, bound_to_workspace, real_samples, run_fig9
+from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE, PANELS, bound_to_workspace, control_hyper, real_samples, run_fig9
 from denali_pipe.report.fig9 import NEVER, samples_for, write_fig9
 from denali_pipe.train import Hyper
 from denali_pipe.transforms import FIDELITIES, KERNEL_BINS, ZONES, Pairs, Transforms, ZoneTransforms, split_pairs
@@ -167,3 +167,13 @@ def test_mean_baseline_is_predicting_the_training_mean(data, runs, tmp_path):
     write_fig9(runs, tmp_path / "fig9.png", tmp_path / "fig9.csv")
     row = pd.read_csv(tmp_path / "fig9.csv").query("fidelity == @MEAN_BASELINE")
     assert len(row) == len(PANELS) and np.allclose(row["rmse"], np.sqrt(np.mean(miss**2))) and (row["rmse_std"] == 0).all()
+
+
+def test_the_control_takes_as_many_steps_as_a_twin_model():
+    # a twin model: 5 epochs of ceil(2110 / 64) = 33 batches = 165 steps, so
+    # the control on 10 samples (1 batch an epoch) gets 165 epochs; at 2200
+    # samples 5 x 35 = 175 steps, on 200 (4 batches) ceil(175 / 4) = 44
+    hp = Hyper(lr=1e-3, epochs=5, batch_size=64, norm="raw")
+    assert control_hyper(hp, 2100, 10).epochs == 165
+    assert control_hyper(hp, 2000, 200).epochs == 44
+    assert control_hyper(hp, 2000, 200).lr == hp.lr
