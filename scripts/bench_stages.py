@@ -53,8 +53,9 @@ from denali_pipe.capture_sets import FOLDER_SUFFIX, parse_set_name
 REPO = Path(__file__).resolve().parents[1]
 WORKFLOW_FILES = ("Snakefile", "rules", "config", "profiles", "envs", "report", "examples")
 # The stages fitted, and the work terms their CPU time and peak memory are
-# linear in: what each reads or writes (a training cell holds its whole
-# dataset in memory, counted as input values in its `hist` term).
+# linear in: CPU time in what each reads or writes; peak memory in one
+# location's frames (the capture stages stream locations), a set's histograms
+# (preprocess) or a cell's whole dataset, as input values in its `hist` term.
 CPU_TERMS = {
     "rig": ("const", "hist", "frames"),
     "ingest": ("const", "hist", "frames"),
@@ -63,9 +64,9 @@ CPU_TERMS = {
     "train": ("const", "samples"),
 }
 RSS_TERMS = {
-    "rig": ("const", "frames"),
-    "ingest": ("const", "frames"),
-    "poses": ("const", "tracking"),
+    "rig": ("const", "frame"),
+    "ingest": ("const", "frame"),
+    "poses": ("const", "frame"),
     "preprocess": ("const", "hist"),
     "train": ("const", "hist"),
 }
@@ -221,11 +222,22 @@ def print_throughput(jobs: pd.DataFrame, fitted: dict) -> None:
     print("\nPer-job cost models (fitted on every run given; CPU-s and MB per unit of work):")
     for rule in fitted:
         for model, m in fitted[rule].items() if rule == "train" else [("", fitted[rule])]:
-
-            def fmt(d):
-                return " + ".join(f"{v:.3g} {t}" for t, v in d.items()) or "0"
-
-            print(f"  {rule} {model}".rstrip() + f": cpu_s = {fmt(m['cpu_s'])};  rss_mb = {fmt(m['rss_mb'])}")
+            terms = {kind: " + ".join(f"{v:.3g} {t}" for t, v in m[kind].items()) or "0" for kind in ("cpu_s", "rss_mb")}
+            print(f"  {rule} {model}".rstrip() + f": cpu_s = {terms['cpu_s']};  rss_mb = {terms['rss_mb']}")
+    # growth: what one more location of one set adds, at the paper's frames
+    tpx, cpx = costs.frame_pixels({"tracking_scale": 1.0, "colocated_scale": 1.0})
+    print("\nGrowth at the paper's 1280x720 frames: CPU-s one more location of a set adds to its job; peak MB of a job at 100 locations:")
+    for rule in ("rig", "ingest", "poses", "preprocess"):
+        if rule in fitted:
+            per = {r: costs.predict(fitted[rule]["cpu_s"], {**costs.set_work(1, 3, r, tpx, cpx), "const": 0}) for r in ("3x3", "8x8")}
+            peak = costs.predict(fitted[rule]["rss_mb"], costs.set_work(100, 3, "8x8", tpx, cpx))
+            print(
+                f"  {rule:<11} 3x3 {per['3x3']:.3f}, 8x8 {per['8x8']:.3f} CPU-s a location; fixed {fitted[rule]['cpu_s'].get('const', 0):.1f} CPU-s a job; peak {peak:.0f} MB"
+            )
+    for model, m in fitted.get("train", {}).items():
+        print(
+            f"  train {model:<12}{m['cpu_s'].get('samples', 0) * 1e3:.3f} CPU-ms a training sample-epoch; fixed {m['cpu_s'].get('const', 0):.1f} CPU-s a cell"
+        )
 
 
 def print_check(jobs: pd.DataFrame, check: str) -> None:
@@ -249,15 +261,24 @@ def print_check(jobs: pd.DataFrame, check: str) -> None:
 # --- the paper preset's DAG -------------------------------------------------------
 
 
-def paper_dag(configfiles: list[str]) -> tuple[dict[int, dict], dict[int, list[int]]]:
-    """{node: {rule, wildcards}} and {node: its parents} of `snakemake --dag`
-    for the paper preset's `rule all`, in a scratch copy without outputs."""
+def scratch_snakemake(runs: list[tuple[list[str], dict]]) -> list[str]:
+    """stdout of `snakemake ARGS --configfile config/presets/paper.yaml
+    extra.yaml` for each (ARGS, extra config), in one scratch copy of the
+    workflow without outputs."""
+    outs = []
     with tempfile.TemporaryDirectory(prefix="denali-dag-") as wd:
         for name in WORKFLOW_FILES:
             subprocess.run(["cp", "-r", str(REPO / name), wd], check=True)
-        bin_dir = Path(sys.executable).parent
-        args = [str(bin_dir / "snakemake"), "--dag", "--configfile", "config/presets/paper.yaml", *configfiles]
-        dot = subprocess.run(args, cwd=wd, capture_output=True, text=True, check=True).stdout
+        snakemake = str(Path(sys.executable).parent / "snakemake")
+        for args, extra in runs:
+            (Path(wd) / "extra.yaml").write_text(yaml.safe_dump(extra))
+            config = ["--configfile", "config/presets/paper.yaml", "extra.yaml"]
+            outs.append(subprocess.run([snakemake, *args, *config], cwd=wd, capture_output=True, text=True, check=True).stdout)
+    return outs
+
+
+def paper_dag(dot: str) -> tuple[dict[int, dict], dict[int, list[int]]]:
+    """{node: {rule, wildcards}} and {node: its parents} of `snakemake --dag` output."""
     nodes, parents = {}, defaultdict(list)
     for m in re.finditer(r'^\s*(\d+)\[label = "([^"]*)"', dot, re.M):
         rule, *pairs = m[2].split("\\n")
@@ -265,6 +286,22 @@ def paper_dag(configfiles: list[str]) -> tuple[dict[int, dict], dict[int, list[i
     for m in re.finditer(r"^\s*(\d+) -> (\d+)", dot, re.M):
         parents[int(m[2])].append(int(m[1]))
     return nodes, parents
+
+
+def print_requests(dry_run: str, label: str) -> None:
+    """Per rule (training: per model), the range of the runtime, mem_mb and
+    gpu requests in a dry run's job listing: what profiles/slurm submits."""
+    requests = defaultdict(list)
+    for block in re.split(r"^rule ", dry_run, flags=re.M)[1:]:
+        rule = block.split(":", 1)[0]
+        model = re.search(r"model=([\w-]+)", block)
+        res = dict(re.findall(r"(\w+)=([\d.]+)(?=[,\s])", block.split("resources:", 1)[1].splitlines()[0])) if "resources:" in block else {}
+        if "runtime" in res:
+            requests[f"{rule} {model[1] if model and rule == 'train' else ''}".strip()].append(res)
+    print(f"\nSLURM requests on the paper preset ({label}), per rule: runtime (min), mem_mb, gpu (min-max over its jobs)")
+    for key, rs in sorted(requests.items()):
+        span = {k: f"{min(float(r.get(k, 0)) for r in rs):g}-{max(float(r.get(k, 0)) for r in rs):g}" for k in ("runtime", "mem_mb", "gpu")}
+        print(f"  {key:<20}{len(rs):>5} jobs  runtime {span['runtime']:<12} mem_mb {span['mem_mb']:<12} gpu {span['gpu']}")
 
 
 def paper_config(configfiles: list[str]) -> dict:
@@ -385,7 +422,16 @@ def list_schedule(durations: dict[int, float], parents: dict[int, list[int]], co
 
 def print_projection(fitted: dict, jobs: pd.DataFrame, args: argparse.Namespace) -> None:
     cfg = paper_config(args.configfile)
-    nodes, parents = paper_dag(args.configfile)
+    from snakemake.utils import update_config
+
+    extra: dict = {}
+    for path in args.configfile:
+        update_config(extra, yaml.safe_load((REPO / path).read_text()))
+    on_gpus = {**extra, "train": {**extra.get("train", {}), "gpus": 1}}
+    dot, cpu_run, gpu_run = scratch_snakemake([(["--dag"], extra), (["-n"], extra), (["-n"], on_gpus)])
+    print_requests(cpu_run, "train.gpus 0")
+    print_requests(gpu_run, "train.gpus 1")
+    nodes, parents = paper_dag(dot)
     pjobs = paper_jobs(nodes, parents, cfg, jobs)
     cpu = {n: job_cost(j, fitted, "cpu_s") for n, j in pjobs.items()}
     unmodelled = defaultdict(int)
@@ -450,8 +496,9 @@ def main() -> None:
     ap.add_argument("--node-cores", type=int, default=16)
     ap.add_argument("--node-gpus", type=int, default=1)
     ap.add_argument("--gpu-speedup", type=float, default=20.0, help="ASSUMED training speed of a GPU over one core")
-    ap.add_argument("--submit-overhead-s", type=float, default=15.0, help="per SLURM job: queueing, start-up (measured: docs/cluster.md)")
+    ap.add_argument("--submit-overhead-s", type=float, default=10.0, help="per SLURM job: queueing and the job step's own Snakemake (measured 1 + 8 s: docs/cluster.md)")
     ap.add_argument("--write-costs", type=Path)
+    ap.add_argument("--no-projection", action="store_true", help="skip the paper preset's DAG (a minute of dry runs)")
     args = ap.parse_args()
     jobs = pd.concat([measured_jobs(r, coarse=False) for r in args.runs] + [measured_jobs(r, coarse=True) for r in args.coarse], ignore_index=True)
     fitted = fit_models(jobs[jobs.run != args.check] if args.check else jobs)
@@ -461,7 +508,8 @@ def main() -> None:
     if args.write_costs:  # first: the projection's DAG build reads it
         runs = [f"{r.name}: {run_scale(r)['locations']} locations, {'coarse' if r in args.coarse else 'fine'} sampling" for r in [*args.runs, *args.coarse]]
         write_cost_table(args.write_costs, fitted, runs)
-    print_projection(fitted, jobs, args)
+    if not args.no_projection:
+        print_projection(fitted, jobs, args)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ def test_frame_pixels_follow_the_rig_scales():
 def test_set_work_counts_histogram_values_and_pixels():
     w3 = costs.set_work(25, 3, "3x3", 100, 10)
     w8 = costs.set_work(25, 3, "8x8", 100, 10)
-    assert w3 == {"const": 1.0, "hist": 25 * 3 * 9 * 128, "frames": 25 * 110, "tracking": 25 * 100, "samples": 0.0}
+    assert w3 == {"const": 1.0, "hist": 25 * 3 * 9 * 128, "frames": 25 * 110, "tracking": 25 * 100, "frame": 110, "samples": 0.0}
     assert w8["hist"] == 25 * 3 * 64 * 128 and w8["frames"] == w3["frames"]
 
 
@@ -24,6 +24,7 @@ def test_a_rig_job_adds_its_sets_work_but_pays_its_fixed_cost_once():
     sets = [costs.set_work(10, 3, r, 50, 5) for r in ("3x3", "8x8")]
     job = costs.combine(sets)
     assert job["const"] == 1.0 and job["hist"] == sets[0]["hist"] + sets[1]["hist"] and job["frames"] == 2 * sets[0]["frames"]
+    assert job["frame"] == sets[0]["frame"]  # one location's frames in memory at a time
 
 
 def test_predict_is_the_linear_model():

@@ -9,6 +9,8 @@ model of CPU seconds and of peak resident memory (MB) in the work a job does:
 - `frames`: RealSense pixels it handles (locations x (tracking + co-located
   pixels), each an RGB and a depth image)
 - `tracking`: tracking-camera pixels it handles (locations x tracking pixels)
+- `frame`: the pixels of one location's frame pair (tracking + co-located):
+  the stages hold a location's frames at a time, so their memory follows it
 - `samples`: training samples it processes (training samples x epochs)
 
 The SLURM profile's requests (rules: `resources:`) and the paper preset's
@@ -24,7 +26,7 @@ import yaml
 
 from denali_pipe import geometry as geo
 
-TERMS = ("const", "hist", "frames", "tracking", "samples")
+TERMS = ("const", "hist", "frames", "tracking", "frame", "samples")
 
 
 def frame_pixels(frames: dict) -> tuple[int, int]:
@@ -45,21 +47,23 @@ def set_work(locations: int, repeats: int, resolution: str, tracking_px: int, co
         "hist": float(locations * repeats * zones * geo.N_BINS),
         "frames": float(locations * (tracking_px + colocated_px)),
         "tracking": float(locations * tracking_px),
+        "frame": float(tracking_px + colocated_px),
         "samples": 0.0,
     }
 
 
 def combine(works: list[dict[str, float]]) -> dict[str, float]:
-    """The work of one job that handles several sets (a rig job): terms add, `const` stays 1."""
+    """The work of one job that handles several sets one after another (a
+    rig job): terms add, but `const` stays 1 and `frame` is the largest set's."""
     total = {t: sum(w[t] for w in works) for t in TERMS}
-    total["const"] = 1.0
+    total.update(const=1.0, frame=max(w["frame"] for w in works))
     return total
 
 
 def training_work(samples: float) -> dict[str, float]:
     """The work terms of a training cell that processes `samples` training
     samples (training split size x epochs)."""
-    return {"const": 1.0, "hist": 0.0, "frames": 0.0, "tracking": 0.0, "samples": float(samples)}
+    return {"const": 1.0, "hist": 0.0, "frames": 0.0, "tracking": 0.0, "frame": 0.0, "samples": float(samples)}
 
 
 def predict(model: dict[str, float], work: dict[str, float]) -> float:
