@@ -383,10 +383,10 @@ def job_speedup(rule):
 def request_runtime(rule):
     """`runtime` (minutes) of a rule's jobs: predicted CPU seconds x headroom."""
     return lambda wildcards: runtime_minutes(
-        predict(cost_model(COSTS, rule, wildcards.get("model")).get("cpu_s"), job_work(rule, wildcards)), CLUSTER, job_speedup(rule)
+        predict(cost_model(COSTS, rule, wildcards.get("model"), wildcards.get("task"))["cpu_s"], job_work(rule, wildcards)), CLUSTER, job_speedup(rule)
     )
 
 
 def request_mem_mb(rule):
     """`mem_mb` of a rule's jobs: predicted peak RSS x headroom."""
-    return lambda wildcards: mem_mb(predict(cost_model(COSTS, rule, wildcards.get("model")).get("rss_mb"), job_work(rule, wildcards)), CLUSTER)
+    return lambda wildcards: mem_mb(predict(cost_model(COSTS, rule, wildcards.get("model"), wildcards.get("task"))["rss_mb"], job_work(rule, wildcards)), CLUSTER)

@@ -134,10 +134,12 @@ def train_row(run: Path, bench: Path) -> dict:
     return {
         "work": work,
         "model": m["cell"]["model"],
+        "task": m["cell"]["task"],
         "units": m["samples_seen"],
         "key": (m["cell"]["split"], m["cell"]["condition"], m["cell"]["task"]),
         "train_fraction": m["n_train"] / pq.read_metadata(dataset).num_rows,
         "input_values": int(np.prod(m["input_shape"])),
+        "flops": m.get("flops") or 0,
         "resolution": m["cell"]["resolution"],
     }
 
@@ -156,7 +158,7 @@ def measured_jobs(run: Path, coarse: bool) -> pd.DataFrame:
         rec = pd.read_csv(bench, sep="\t").iloc[0]
         stretch = full_cpu(rec.s, rec.cpu_time) / rec.cpu_time if coarse and rec.cpu_time > 0 else 1.0
         row = {"run": run.name or str(run), "rule": rule, "job": bench.stem, "wall_s": rec.s, "cpu_s": rec.cpu_time * stretch}
-        row.update(rss_mb=rec.max_rss, io_mb=(rec.io_in + rec.io_out) * stretch, model="")
+        row.update(rss_mb=rec.max_rss, io_mb=(rec.io_in + rec.io_out) * stretch, model="", task="")
         if rule == "train":
             row.update(train_row(run, bench))
         else:
@@ -191,20 +193,44 @@ def fit_models(jobs: pd.DataFrame) -> dict:
     fitted = {}
     for rule, group in jobs.groupby("rule"):
         if rule == "train":
-            fitted[rule] = {
-                m: {"cpu_s": fit_linear(g, CPU_TERMS[rule], "cpu_s"), "rss_mb": fit_linear(g, RSS_TERMS[rule], "rss_mb")} for m, g in group.groupby("model")
-            }
+            fitted[rule] = fit_cells(group)
         else:
             fitted[rule] = {"cpu_s": fit_linear(group, CPU_TERMS[rule], "cpu_s"), "rss_mb": fit_linear(group, RSS_TERMS[rule], "rss_mb")}
     return fitted
 
 
-def model_of(fitted: dict, rule: str, model: str = "") -> dict:
-    return fitted[rule][model] if rule == "train" else fitted[rule]
+def fit_cells(cells: pd.DataFrame, reference: str = "cnn1d") -> dict:
+    """Per network and task (`<model>_<task>`), and per network pooled
+    (`<model>`), CPU seconds linear in samples x epochs. Where the measured
+    cells all saw about as many samples (within 1.5x: one scale, one
+    schedule) no per-sample cost is pinned: the fixed cost is taken as the
+    `reference` network's (same interpreter, imports, data loading) and the
+    per-sample cost as the rest of the CPU time per sample, at least the
+    network's forward FLOPs times the reference's CPU seconds per FLOP
+    (these small networks are compute-bound on a CPU core)."""
+    ref = fit_linear(cells[cells.model == reference], CPU_TERMS["train"], "cpu_s")
+    per_flop = ref.get("samples", 0.0) / cells[cells.model == reference].flops.mean()
+    groups = [*cells.groupby("model"), *cells.groupby(cells.model + "_" + cells.task)]
+    fitted = {}
+    for key, g in groups:
+        cpu = fit_linear(g, CPU_TERMS["train"], "cpu_s")
+        if g.samples.max() < 1.5 * g.samples.min() and key != reference:
+            fixed = ref.get("const", 0.0)
+            cpu = {"const": fixed, "samples": float(max(per_flop * g.flops.mean(), ((g.cpu_s - fixed) / g.samples).mean()))}
+        fitted[key] = {"cpu_s": cpu, "rss_mb": fit_linear(g, RSS_TERMS["train"], "rss_mb")}
+    return fitted
+
+
+def model_of(fitted: dict, rule: str, model: str = "", task: str = "") -> dict:
+    """A rule's fitted models; a training cell's: its network and task's, else its network's, else the 1D CNN's."""
+    if rule != "train":
+        return fitted[rule]
+    cells = fitted["train"]
+    return cells.get(f"{model}_{task}") or cells.get(model) or cells["cnn1d"]
 
 
 def predicted(jobs: pd.DataFrame, fitted: dict, kind: str) -> np.ndarray:
-    return np.array([costs.predict(model_of(fitted, r.rule, r.model)[kind], {t: r[t] for t in costs.TERMS}) for _, r in jobs.iterrows()])
+    return np.array([costs.predict(model_of(fitted, r.rule, r.model, r.task)[kind], {t: r[t] for t in costs.TERMS}) for _, r in jobs.iterrows()])
 
 
 # --- printing ---------------------------------------------------------------------
@@ -245,7 +271,7 @@ def print_check(jobs: pd.DataFrame, check: str) -> None:
     the models fitted without it."""
     rest, mine = jobs[jobs.run != check], jobs[jobs.run == check].copy()
     fitted = fit_models(rest)
-    mine = mine[[r.rule in fitted and (r.rule != "train" or r.model in fitted["train"]) for _, r in mine.iterrows()]]
+    mine = mine[[r.rule in fitted for _, r in mine.iterrows()]]
     mine["proj_cpu"] = predicted(mine, fitted, "cpu_s")
     mine["proj_rss"] = predicted(mine, fitted, "rss_mb")
     print(f"\nMeasured vs projected on {check} (models fitted on the other runs only):")
@@ -331,7 +357,7 @@ def paper_jobs(nodes: dict, parents: dict, cfg: dict, jobs: pd.DataFrame) -> dic
     input_values = cells.groupby("resolution").input_values.first().to_dict()
     out = {}
     for node, n in nodes.items():
-        rule, model, work = n["rule"], "", None
+        rule, model, task, work = n["rule"], "", "", None
         if rule == "ingest":
             work = work_of(n["set"])
         elif rule == "rig":
@@ -342,7 +368,7 @@ def paper_jobs(nodes: dict, parents: dict, cfg: dict, jobs: pd.DataFrame) -> dic
             # a preprocess job's parents: its set's ingest and its background's
             work = work_of(sets[0] if len(sets) == 1 else next(s for s in sets if not parse_set_name(s).is_background))
         elif rule == "train":
-            model = n["model"]
+            model, task = n["model"], n["task"]
             data = next(p for p in parents[node] if nodes[p]["rule"] in ("dataset", "variant_dataset"))
             res = nodes[data].get("res", cfg["train"]["resolution"])
             n_sets = sum(1 for p in parents[data] if nodes[p]["rule"] == "preprocess")
@@ -354,16 +380,14 @@ def paper_jobs(nodes: dict, parents: dict, cfg: dict, jobs: pd.DataFrame) -> dic
             frac = share.get((n["split"], n["condition"], n["task"]), random_share)
             work = costs.training_work(frac * dataset * epochs)
             work["hist"] = float(dataset * input_values.get(res, input_values["3x3"]) * (64 / 9 if res == "8x8" and "8x8" not in input_values else 1))
-        out[node] = {"rule": rule, "model": model, "work": work}
+        out[node] = {"rule": rule, "model": model, "task": task, "work": work}
     return out
 
 
 def job_cost(job: dict, fitted: dict, kind: str) -> float | None:
     if job["work"] is None or job["rule"] not in fitted:
         return None
-    models = fitted[job["rule"]]
-    model = (models.get(job["model"]) or models.get("cnn1d")) if job["rule"] == "train" else models
-    return max(0.0, costs.predict(model[kind], job["work"]))
+    return max(0.0, costs.predict(model_of(fitted, job["rule"], job["model"], job["task"])[kind], job["work"]))
 
 
 def bottom_levels(durations: dict[int, float], parents: dict[int, list[int]]) -> dict[int, float]:
@@ -496,7 +520,9 @@ def main() -> None:
     ap.add_argument("--node-cores", type=int, default=16)
     ap.add_argument("--node-gpus", type=int, default=1)
     ap.add_argument("--gpu-speedup", type=float, default=20.0, help="ASSUMED training speed of a GPU over one core")
-    ap.add_argument("--submit-overhead-s", type=float, default=10.0, help="per SLURM job: queueing and the job step's own Snakemake (measured 1 + 8 s: docs/cluster.md)")
+    ap.add_argument(
+        "--submit-overhead-s", type=float, default=10.0, help="per SLURM job: queueing and the job step's own Snakemake (measured 1 + 8 s: docs/cluster.md)"
+    )
     ap.add_argument("--write-costs", type=Path)
     ap.add_argument("--no-projection", action="store_true", help="skip the paper preset's DAG (a minute of dry runs)")
     args = ap.parse_args()

@@ -43,8 +43,11 @@ def test_requests_apply_headroom_speedup_and_floors():
 def test_the_committed_cost_table_loads_and_has_the_heavy_rules():
     table = costs.load_costs(REPO / "config/costs.yaml")
     assert {"rig", "ingest", "poses", "preprocess", "train"} <= set(table["rules"])
-    # a network the table never measured gets the default model
-    assert costs.cost_model(table, "train", "no-such-net") == table["rules"]["train"]["default"]
+    # a network and task's own model, else the network's, else the default
+    cells = table["rules"]["train"]
+    assert costs.cost_model(table, "train", "cnn1d", "location") == cells["cnn1d_location"]
+    assert costs.cost_model(table, "train", "cnn1d", "no-such-task") == cells["cnn1d"]
+    assert costs.cost_model(table, "train", "no-such-net", "location") == cells["default"]
 
 
 def test_a_malformed_cost_table_names_its_file(tmp_path: Path):

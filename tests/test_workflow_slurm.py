@@ -64,7 +64,7 @@ def expected_requests(wd, configfiles: tuple[str, ...], cell_dir: str) -> tuple[
     samples = m["n_train"] + m["n_validation"] + m["n_test"]
     work = costs.training_work(samples * m["hyper"]["epochs"])
     work["hist"] = float(samples * 9 * N_BINS)
-    model = costs.cost_model(table, "train", m["cell"]["model"])
+    model = costs.cost_model(table, "train", m["cell"]["model"], m["cell"]["task"])
     return (
         costs.runtime_minutes(costs.predict(model["cpu_s"], work), cfg["cluster"]),
         costs.mem_mb(costs.predict(model["rss_mb"], work), cfg["cluster"]),

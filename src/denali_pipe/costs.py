@@ -86,13 +86,14 @@ def load_costs(path: str | Path) -> dict:
     return table
 
 
-def cost_model(table: dict, rule: str, model: str | None = None) -> dict:
-    """The rule's entry (a training cell's: its model's, else the table's
-    `default` model for networks never measured)."""
+def cost_model(table: dict, rule: str, model: str | None = None, task: str | None = None) -> dict:
+    """The rule's entry; a training cell's: its network and task's
+    (`<model>_<task>`), else its network's, else the table's `default` (for
+    networks never measured)."""
     entry = table["rules"][rule]
     if rule != "train":
         return entry
-    return entry.get(model, entry["default"])
+    return entry.get(f"{model}_{task}") or entry.get(model) or entry["default"]
 
 
 def runtime_minutes(cpu_s: float, requests: dict, speedup: float = 1.0) -> int:
