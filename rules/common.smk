@@ -356,7 +356,8 @@ FRAME_PIXELS = frame_pixels(config["rig"]["frames"] if config["source"] == "synt
 
 
 def capture_set_work(name):
-    """One capture set's work terms (denali_pipe.costs) at this config's scale."""
+    """One capture set's work terms (denali_pipe.costs) at this config's scale
+    (rig.repeats histograms a location: a release holds 3, as the rig's default)."""
     resolution = parse_set_name(name).resolution
     return set_work(len(planned_locations()), config["rig"]["repeats"], resolution, *FRAME_PIXELS)
 
@@ -389,4 +390,6 @@ def request_runtime(rule):
 
 def request_mem_mb(rule):
     """`mem_mb` of a rule's jobs: predicted peak RSS x headroom."""
-    return lambda wildcards: mem_mb(predict(cost_model(COSTS, rule, wildcards.get("model"), wildcards.get("task"))["rss_mb"], job_work(rule, wildcards)), CLUSTER)
+    return lambda wildcards: mem_mb(
+        predict(cost_model(COSTS, rule, wildcards.get("model"), wildcards.get("task"))["rss_mb"], job_work(rule, wildcards)), CLUSTER
+    )
