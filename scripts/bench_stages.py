@@ -521,7 +521,7 @@ def main() -> None:
     ap.add_argument("--node-gpus", type=int, default=1)
     ap.add_argument("--gpu-speedup", type=float, default=20.0, help="ASSUMED training speed of a GPU over one core")
     ap.add_argument(
-        "--submit-overhead-s", type=float, default=10.0, help="per SLURM job: queueing and the job step's own Snakemake (measured 1 + 8 s: docs/cluster.md)"
+        "--submit-overhead-s", type=float, default=10.0, help="per SLURM job: queueing and the job step's own Snakemake (measured 7-9 s: docs/cluster.md)"
     )
     ap.add_argument("--write-costs", type=Path)
     ap.add_argument("--no-projection", action="store_true", help="skip the paper preset's DAG (a minute of dry runs)")
