@@ -13,9 +13,10 @@ import pandas as pd
 
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
 from denali_pipe.cells import LINEAR, SPLITS, TASKS, is_ill_posed
+from denali_pipe.costs import combine, cost_model, frame_pixels, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
 from denali_pipe.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.experiments.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
-from denali_pipe.geometry import N_LOCATIONS, select_locations
+from denali_pipe.geometry import N_BINS, N_LOCATIONS, RESOLUTIONS, select_locations
 from denali_pipe.io.tree import survey_tree
 from denali_pipe.objects import BACKGROUNDS, VARIANTS, load_catalogue
 from denali_pipe.registry import check_models
@@ -185,17 +186,22 @@ def run_files(models, tasks, splits, name="metrics.json", res=TRAIN["resolution"
     return [f"{d}/{name}" for d in run_dirs(models, tasks, splits, res)]
 
 
+def planned_locations():
+    """The gantry locations of every capture set: the rig's, a release tree's,
+    or the whole grid for capture streams (read only by ingest)."""
+    if config["source"] == "synthetic":
+        return select_locations(config["rig"]["n_locations"])
+    # a release tree's sets all hold its locations (checked above)
+    return sorted(TREE.locations) if TREE.files else range(N_LOCATIONS)
+
+
 @functools.cache
 def planned_samples(res):
     """The dataset's sample table at `res` as the config plans it: one row
     per benchmark set and gantry location (the rig's locations, a release
     tree's, or the whole grid for capture streams), the columns conditions.py
     filters on."""
-    if config["source"] == "synthetic":
-        locations = select_locations(config["rig"]["n_locations"])
-    else:
-        # a release tree's sets all hold its locations (checked above); streams are read only by ingest
-        locations = sorted(TREE.locations) if TREE.files else range(N_LOCATIONS)
+    locations = planned_locations()
     names = set(benchmark_sets(res))
     rows = [
         {"class": CATALOGUE[s.object].cls, "type": CATALOGUE[s.object].type, "size": s.size, "light": s.light, "location": k}
@@ -336,3 +342,54 @@ def fig9_hyper(wildcards):
     if FIG9_MODEL not in MODELS:
         raise ValueError(f"Fig 9 trains the 1D CNN with the settings of train.models.{FIG9_MODEL}, which the config leaves out")
     return json.dumps({**MODELS[FIG9_MODEL]["location"], "epochs": FIT["fig9"]["epochs"]}, sort_keys=True)
+
+
+# --- cluster requests ---------------------------------------------------------
+# Each heavy job asks for its rule's measured cost (config/costs.yaml) at this
+# config's scale: runtime (minutes) and mem_mb as `resources:` callables, which
+# profiles/slurm passes to sbatch (docs/cluster.md).
+
+CLUSTER = config["cluster"]
+COSTS = load_costs(CLUSTER["costs"])
+# a release tree's frames are the cameras' own size (the synthetic rig's follow rig.frames)
+FRAME_PIXELS = frame_pixels(config["rig"]["frames"] if config["source"] == "synthetic" else {"tracking_scale": 1.0, "colocated_scale": 1.0})
+
+
+def capture_set_work(name):
+    """One capture set's work terms (denali_pipe.costs) at this config's scale
+    (rig.repeats histograms a location: a release holds 3, as the rig's default)."""
+    resolution = parse_set_name(name).resolution
+    return set_work(len(planned_locations()), config["rig"]["repeats"], resolution, *FRAME_PIXELS)
+
+
+def job_work(rule, wildcards):
+    """The work of a rig job (its object and size: every resolution and
+    lighting), a per-set job, or a training cell (an upper bound: the whole
+    dataset, not its training split, times the cell's epochs)."""
+    if rule == "rig":
+        return combine([capture_set_work(f"{wildcards.object}_{wildcards.size}_{r}_{li}") for r in config["resolutions"] for li in config["lightings"]])
+    if rule != "train":
+        return capture_set_work(wildcards.set)
+    samples = len(planned_samples(wildcards.res)) * config["rig"]["repeats"]
+    epochs = json.loads(shlex.split(hyper_arg(wildcards))[0]).get("epochs", 1)
+    work = training_work(samples * epochs)
+    work["hist"] = float(samples * RESOLUTIONS[wildcards.res] ** 2 * N_BINS)
+    return work
+
+
+def job_speedup(rule):
+    return CLUSTER["gpu_speedup"] if rule == "train" and TRAIN["gpus"] > 0 else 1.0
+
+
+def request_runtime(rule):
+    """`runtime` (minutes) of a rule's jobs: predicted CPU seconds x headroom."""
+    return lambda wildcards: runtime_minutes(
+        predict(cost_model(COSTS, rule, wildcards.get("model"), wildcards.get("task"))["cpu_s"], job_work(rule, wildcards)), CLUSTER, job_speedup(rule)
+    )
+
+
+def request_mem_mb(rule):
+    """`mem_mb` of a rule's jobs: predicted peak RSS x headroom."""
+    return lambda wildcards: mem_mb(
+        predict(cost_model(COSTS, rule, wildcards.get("model"), wildcards.get("task"))["rss_mb"], job_work(rule, wildcards)), CLUSTER
+    )

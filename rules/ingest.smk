@@ -12,6 +12,9 @@ rule ingest:
         "logs/ingest/{set}.log",
     benchmark:
         "benchmarks/ingest/{set}.tsv"
+    resources:
+        runtime=request_runtime("ingest"),
+        mem_mb=request_mem_mb("ingest"),
     params:
         object=ingest_object_arg,
     shell:

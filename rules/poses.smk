@@ -13,6 +13,9 @@ rule poses:
         "logs/poses/{set}.log",
     benchmark:
         "benchmarks/poses/{set}.tsv"
+    resources:
+        runtime=request_runtime("poses"),
+        mem_mb=request_mem_mb("poses"),
     shell:
         "{DENALI} poses {input} --out {output} > {log} 2>&1"
 

@@ -25,6 +25,9 @@ rule preprocess:
         "logs/features/{set}.log",
     benchmark:
         "benchmarks/preprocess/{set}.tsv"
+    resources:
+        runtime=request_runtime("preprocess"),
+        mem_mb=request_mem_mb("preprocess"),
     shell:
         "{DENALI} preprocess {input.store} --background {input.background} --crop {input.crop} --out {output} > {log} 2>&1"
 

@@ -15,6 +15,9 @@ if config["source"] == "synthetic":
             "logs/rig/{object}_{size}.log",
         benchmark:
             "benchmarks/rig/{object}_{size}.tsv"
+        resources:
+            runtime=request_runtime("rig"),
+            mem_mb=request_mem_mb("rig"),
         params:
             object=rig_object_arg,
             config=json.dumps({"seed": config["seed"], "rig": config["rig"]}, sort_keys=True),

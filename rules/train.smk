@@ -18,6 +18,8 @@ rule train:
     threads: config["train"]["threads"]
     resources:
         gpu=config["train"]["gpus"],
+        runtime=request_runtime("train"),
+        mem_mb=request_mem_mb("train"),
     params:
         cell=cell_arg,
         hyper=hyper_arg,

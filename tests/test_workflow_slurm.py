@@ -2,19 +2,28 @@
 `profiles/slurm`: every job is a SLURM job, a job killed by SLURM fails alone
 (--keep-going), and the rerun runs exactly that job and its dependents."""
 
+import json
 import re
 import subprocess
 import threading
 import time
+from datetime import datetime
 
+import pandas as pd
 import pytest
 from slurm_cluster import SlurmUnavailable, local_slurm
-from workflow import TABLE5, copy_workflow, job_counts, reduced_configfiles, snakemake
+from workflow import TABLE5, copy_workflow, job_counts, merged_config, reduced_configfiles, snakemake
+
+from denali_pipe import costs
+from denali_pipe.geometry import N_BINS
 
 pytestmark = pytest.mark.slurm
 # the cell SLURM kills: nothing but Table 5 depends on it
 VICTIM = "clean_3x3_all_random_cnn1d_location_42"
 VICTIM_DIR = "results/runs/clean/3x3/all/random/cnn1d_location/seed42"
+# Requests follow the measured costs, not the floors (config `cluster`); a
+# shared test machine can stretch a job's wall time far past its CPU time.
+CLUSTER = {"min_runtime_min": 1, "min_mem_mb": 1, "runtime_headroom": 100}
 
 
 @pytest.fixture(scope="module")
@@ -45,13 +54,34 @@ def cancel_when_queued(comment: str, stop: threading.Event) -> list[int]:
     return cancelled
 
 
+def expected_requests(wd, configfiles: tuple[str, ...], cell_dir: str) -> tuple[int, int]:
+    """(runtime minutes, mem MB) a 3x3 1D CNN cell should ask for: its rule's
+    cost table entry (config/costs.yaml) for its dataset (every planned sample
+    is in the random split's train, validation or test part) times its epochs."""
+    cfg = merged_config(wd, *configfiles)
+    table = costs.load_costs(wd / cfg["cluster"]["costs"])
+    m = json.loads((wd / cell_dir / "metrics.json").read_text())
+    samples = m["n_train"] + m["n_validation"] + m["n_test"]
+    work = costs.training_work(samples * m["hyper"]["epochs"])
+    work["hist"] = float(samples * 9 * N_BINS)
+    model = costs.cost_model(table, "train", m["cell"]["model"], m["cell"]["task"])
+    return (
+        costs.runtime_minutes(costs.predict(model["cpu_s"], work), cfg["cluster"]),
+        costs.mem_mb(costs.predict(model["rss_mb"], work), cfg["cluster"]),
+    )
+
+
+def slurm_time(field: str, job: str) -> datetime:
+    return datetime.fromisoformat(re.search(rf"\b{field}=(\S+)", job)[1])
+
+
 def mtimes(wd) -> dict[str, int]:
     return {str(p.relative_to(wd)): p.stat().st_mtime_ns for p in (wd / "results").rglob("*") if p.is_file()}
 
 
 def test_table5_on_slurm_and_a_killed_job_reruns_alone(cluster, tmp_path):
     wd = copy_workflow(tmp_path)
-    config = reduced_configfiles(wd)
+    config = reduced_configfiles(wd, cluster=CLUSTER)
     run = ("--profile", "profiles/slurm", *cluster.snakemake_args, "--jobs", "4")
 
     stop = threading.Event()
@@ -92,10 +122,16 @@ def test_table5_on_slurm_and_a_killed_job_reruns_alone(cluster, tmp_path):
     rerun = submissions(second.stdout + second.stderr)
     assert sorted(rerun.values()) == ["rule_table5", "rule_train"]
     assert set(rerun) <= cluster.job_ids_completed() and not set(rerun) & set(jobs)
-    # the cell asked SLURM for the profile's memory and runtime (slurmctld keeps it MinJobAge = 300 s)
+    # the cell asked SLURM for its rule's measured cost at this scale (slurmctld keeps it MinJobAge = 300 s)
     train_id = next(i for i, name in rerun.items() if name == "rule_train")
     job = subprocess.run(["scontrol", "show", "job", str(train_id)], capture_output=True, text=True, check=True).stdout
-    assert "TimeLimit=1-00:00:00" in job and re.search(r"TRES=cpu=1,mem=8000M", job), job
+    runtime, mem = expected_requests(wd, config[1:], VICTIM_DIR)
+    assert f"TimeLimit={runtime // 60:02d}:{runtime % 60:02d}:00" in job and re.search(rf"TRES=cpu=1,mem={mem}M", job), (runtime, mem, job)
+    # a submission's cost: SLURM's queueing and the job step's own Snakemake around the cell's command
+    bench = pd.read_csv(wd / "benchmarks" / f"{VICTIM_DIR}.tsv", sep="\t").iloc[0]
+    queued = (slurm_time("StartTime", job) - slurm_time("SubmitTime", job)).total_seconds()
+    ran = (slurm_time("EndTime", job) - slurm_time("StartTime", job)).total_seconds()
+    print(f"SLURM: the cell's job queued {queued:.0f} s, ran {ran:.0f} s, of which its command {bench.s:.1f} s ({bench.cpu_time:.1f} CPU-s)")
     after = mtimes(wd)
     touched = {k for k in before if after.get(k) != before[k]}
     assert touched == set(), sorted(touched)
