@@ -91,14 +91,18 @@ def check_left_out(left_out: list[dict], models: dict, benchmark_model: str) -> 
     """`train.left_out` as {model: reason}, in config order: the registered
     models a preset does not train for Tables 2 and 10 and the
     speed-vs-accuracy chart, which print each one's row as absent with its
-    reason. ValueError naming the key when an entry names no registered
-    model, names one twice, or names `benchmark_model` (Table 5 and the
-    one-model experiments train it)."""
+    reason. `models` is the config's `train.models`: an entry naming a model
+    set to null there is dropped (the model is gone from every table).
+    ValueError naming the key when an entry names no model of it, names one
+    twice, or names `benchmark_model` (Table 5 and the one-model experiments
+    train it)."""
     reasons: dict[str, str] = {}
     for entry in left_out:
         name = entry["model"]
         if name not in models:
-            raise ValueError(f"train.left_out: {name!r} is not a registered model of {KEY} ({', '.join(models)})")
+            raise ValueError(f"train.left_out: {name!r} is not a model of {KEY} ({', '.join(models)})")
+        if models[name] is None:
+            continue
         if name in reasons:
             raise ValueError(f"train.left_out: {name!r} is named twice")
         if name == benchmark_model:
