@@ -19,7 +19,7 @@ from denali_pipe.experiments.jitter import RESOLUTION as JITTER_RESOLUTION, jitt
 from denali_pipe.geometry import N_BINS, N_LOCATIONS, RESOLUTIONS, select_locations
 from denali_pipe.io.tree import survey_tree
 from denali_pipe.objects import BACKGROUNDS, VARIANTS, load_catalogue
-from denali_pipe.registry import check_models
+from denali_pipe.registry import check_left_out, check_models
 
 min_version("9.0")
 
@@ -34,6 +34,12 @@ validate(config, "../config/schema.yaml")
 MODELS = check_models(config["train"]["models"], config["train"]["benchmark_model"])
 BENCHMARK_MODEL = config["train"]["benchmark_model"]
 BENCHMARK_LABEL = MODELS[BENCHMARK_MODEL].get("label", BENCHMARK_MODEL)
+# The models this preset does not train (train.left_out, {model: reason}):
+# Tables 2 and 10 and the speed-vs-accuracy chart print them as absent, with
+# the reason; their cells stay targets of their own.
+LEFT_OUT = check_left_out(config["train"]["left_out"], config["train"]["models"], BENCHMARK_MODEL)
+TRAINED_MODELS = [m for m in MODELS if m not in LEFT_OUT]
+LEFT_OUT_ARG = f"--left-out {shlex.quote(json.dumps(LEFT_OUT))}"
 
 # The rules run `denali <verb>` through the interpreter that runs this
 # workflow, so jobs find the project whether or not its venv is activated,

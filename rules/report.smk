@@ -15,36 +15,36 @@ rule table5:
 
 rule table2:
     input:
-        run_files(list(MODELS), TASKS, ["random"]),
+        run_files(TRAINED_MODELS, TASKS, ["random"]),
     output:
         report("results/table2.csv", caption="../report/table2.rst", category="3. Training"),
     log:
         "logs/report/table2.log",
     shell:
-        "{DENALI} report table2 {input} --out {output} > {log} 2>&1"
+        "{DENALI} report table2 {input} {LEFT_OUT_ARG} --out {output} > {log} 2>&1"
 
 
 rule table10:
     input:
-        run_files(list(MODELS), TASKS, ["random"]),
+        run_files(TRAINED_MODELS, TASKS, ["random"]),
     output:
         report("results/table10.csv", caption="../report/table10.rst", category="3. Training"),
     log:
         "logs/report/table10.log",
     shell:
-        "{DENALI} report table10 {input} --out {output} > {log} 2>&1"
+        "{DENALI} report table10 {input} {LEFT_OUT_ARG} --out {output} > {log} 2>&1"
 
 
 rule speed_vs_accuracy:
     input:
-        run_files([*MODELS, LINEAR], TASKS, ["random"]),
+        run_files([*TRAINED_MODELS, LINEAR], TASKS, ["random"]),
     output:
         png=report("results/speed_vs_accuracy.png", caption="../report/speed_vs_accuracy.rst", category="3. Training"),
         csv="results/speed_vs_accuracy.csv",
     log:
         "logs/report/speed_vs_accuracy.log",
     shell:
-        "{DENALI} report speed-vs-accuracy {input} --out {output.png} > {log} 2>&1"
+        "{DENALI} report speed-vs-accuracy {input} {LEFT_OUT_ARG} --out {output.png} > {log} 2>&1"
 
 
 rule training_curves:

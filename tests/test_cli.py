@@ -137,3 +137,16 @@ def test_unknown_format_is_an_argument_error(tmp_path, job_config, capsys):
         main(["rig", str(tmp_path / "NOOBJECT_8inch_3x3_lighton_NLOSdata"), "--config", json.dumps(job_config), "--format", "zarr"])
     assert e.value.code == 2
     assert "--format" in capsys.readouterr().err
+
+
+def test_parser_imports_no_heavy_library():
+    """Every job is a fresh `python -m denali_pipe.cli <verb>`: building the
+    parser must leave each library to the verbs that use it (pandas alone
+    cost every job ~0.3 CPU-s)."""
+    import subprocess
+    import sys
+
+    heavy = ("pandas", "torch", "zarr", "matplotlib", "cv2", "mitsuba", "scipy", "sklearn", "trimesh")
+    probe = f"import sys; from denali_pipe.cli import build_parser; build_parser(); print([m for m in {heavy!r} if m in sys.modules])"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"

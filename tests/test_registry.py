@@ -8,7 +8,7 @@ from conftest import REPO
 from torch import nn
 
 from denali_pipe.models import PAPER_MODELS
-from denali_pipe.registry import build, check_models, load_factory, n_outputs
+from denali_pipe.registry import build, check_left_out, check_models, load_factory, n_outputs
 
 CONFIG = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
 HP = {"lr": 1e-3, "epochs": 1, "batch_size": 8, "norm": "raw"}
@@ -34,6 +34,29 @@ def test_build_follows_the_contract():
 def test_a_null_entry_leaves_a_model_out():
     models = check_models({**CONFIG["train"]["models"], "mlp": None}, "cnn1d")
     assert "mlp" not in models and len(models) == 3
+
+
+def test_left_out_models_keep_their_reasons_in_config_order():
+    models = CONFIG["train"]["models"]
+    left = check_left_out([{"model": "transformer", "reason": "slow"}, {"model": "mlp", "reason": "also"}], models, "cnn1d")
+    assert left == {"transformer": "slow", "mlp": "also"} and list(left) == ["transformer", "mlp"]
+    assert check_left_out([], models, "cnn1d") == {}
+    # a model set to null is gone from every table, so naming it leaves nothing out
+    assert check_left_out([{"model": "mlp", "reason": "r"}], {**models, "mlp": None}, "cnn1d") == {}
+
+
+@pytest.mark.parametrize(
+    ("left_out", "message"),
+    [
+        ([{"model": "resnet", "reason": "r"}], "train.left_out: 'resnet' is not a model of train.models"),
+        ([{"model": "mlp", "reason": "r"}, {"model": "mlp", "reason": "s"}], "train.left_out: 'mlp' is named twice"),
+        ([{"model": "cnn1d", "reason": "r"}], "train.left_out: 'cnn1d' is train.benchmark_model"),
+    ],
+    ids=["unregistered", "twice", "benchmark-model"],
+)
+def test_a_wrong_left_out_entry_is_refused_naming_the_key(left_out, message):
+    with pytest.raises(ValueError, match=message.replace(".", r"\.")):
+        check_left_out(left_out, CONFIG["train"]["models"], "cnn1d")
 
 
 @pytest.mark.parametrize(

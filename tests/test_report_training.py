@@ -103,6 +103,31 @@ def test_table2_table10_speed_accuracy_and_curves(tmp_path):
     assert set(pd.read_csv(tmp_path / "fig16.csv")["part"]) == {"train", "validation", "test"}
 
 
+def test_left_out_models_keep_their_rows_with_the_reason(tmp_path):
+    trained, left_out = ("mlp", "cnn1d"), {"cnn3d": "too slow here", "transformer": "also too slow"}
+    paths = [_write_cell(tmp_path, m, t, "random", s) for m in [*trained, "linear"] for t in TASKS for s in (42, 43)]
+    nets = [p / "metrics.json" for p in paths if "linear" not in str(p)]
+    write_table2(nets, tmp_path / "table2.csv", left_out)
+    t2 = pd.read_csv(tmp_path / "table2.csv", keep_default_na=False).set_index("model")
+    assert list(t2.index) == [*trained, *left_out]
+    assert (t2.loc["cnn3d", ["loc_rmse", "shape_top1", "size_accuracy"]] == "n/a").all() and t2.loc["cnn3d", "n_seeds"] == 0
+    assert t2.loc["transformer", "note"] == "not trained on this preset: also too slow" and t2.loc["cnn1d", "note"] == ""
+    assert float(t2.loc["cnn1d", "loc_rmse"]) == pytest.approx(REG["rmse"])
+    with pytest.raises(ValueError, match=r"\['mlp'\] are both trained and left out"):
+        write_table2(nets, tmp_path / "bad.csv", {"mlp": "no"})
+
+    write_table10(nets, tmp_path / "table10.csv", left_out)
+    t10 = pd.read_csv(tmp_path / "table10.csv", keep_default_na=False).set_index(["model", "task"])
+    assert len(t10) == 12 and list(dict.fromkeys(t10.index.get_level_values(0))) == [*trained, *left_out]
+    row = t10.loc[("cnn3d", "shape")]
+    assert row["params"] == "n/a" and row["train_hours"] == "n/a" and int(row["paper_params"]) == TABLE10[("cnn3d", "shape")]["params"]
+    assert row["note"] == "not trained on this preset: too slow here" and t10.loc[("mlp", "size"), "note"] == ""
+    assert float(t10.loc[("cnn1d", "size"), "train_hours"]) == pytest.approx(72 / 3600)
+
+    write_speed_vs_accuracy([p / "metrics.json" for p in paths], tmp_path / "sva.png", left_out)
+    assert set(pd.read_csv(tmp_path / "sva.csv")["model"]) == {*trained, "linear"}
+
+
 def test_pareto_front():
     pts = pd.DataFrame({"train_seconds": [1, 10, 100, 5], "metric": [0.1, 0.3, 0.2, 0.05]})
     assert pareto(pts, higher_is_better=True).tolist() == [True, True, False, False]

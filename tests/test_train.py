@@ -12,7 +12,7 @@ from denali_pipe.cells import Cell
 from denali_pipe.classical import run_linear
 from denali_pipe.models import PAPER_MODELS, cnn1d
 from denali_pipe.preprocess import normalise
-from denali_pipe.train import Hyper, fit, loss_for, partition, run_cell, targets
+from denali_pipe.train import Hyper, fit, loss_for, partition, run_cell, targets, training_device
 
 CLASSES = ("A", "B", "circle")
 N_LOC, REPEATS, BINS = 8, 3, 24
@@ -115,6 +115,20 @@ def test_cells_are_deterministic_and_learn(data):
     assert a.metrics.test == b.metrics.test
     assert all(torch.equal(a.state["model"][k], b.state["model"][k]) for k in a.state["model"])
     assert a.metrics.test["top1"] > 0.8 > a.metrics.baseline["top1"]
+
+
+def test_training_device_is_the_gpu_whenever_torch_sees_one():
+    # `denali train` passes torch.cuda.is_available(): a flag, so both branches run without a GPU
+    assert training_device(cuda_available=True) == "cuda"
+    assert training_device(cuda_available=False) == "cpu"
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+def test_a_cell_trains_and_is_recorded_on_the_gpu(data):
+    x, samples = data
+    res = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory(), device=training_device(True))
+    assert res.metrics.device.startswith("cuda")
+    assert res.metrics.test["top1"] > 0.8 > res.metrics.baseline["top1"]
 
 
 def test_linear_cell_beats_the_baseline(data):

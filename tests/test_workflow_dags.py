@@ -11,6 +11,7 @@ from release_trees import write_set, write_tree
 from workflow import copy_workflow, dry_runs, merged_config
 
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
+from denali_pipe.cells import TASKS
 from denali_pipe.geometry import N_LOCATIONS
 from denali_pipe.objects import load_catalogue
 
@@ -91,6 +92,17 @@ def test_rule_all_dag_builds(scratch, dags, combo):
     assert jobs["ingest"] == len(sets)
     # the rig writes the raw tree only when it is the source, one job per object and size
     assert jobs.get("rig", 0) == (len({(s.object, s.size) for s in sets}) if source == "synthetic" else 0)
+
+
+def test_the_demo_leaves_out_the_cells_of_its_left_out_models(scratch, dags):
+    """The demo's train.left_out models train no Table 2 cell; the paper
+    preset (same seeds, conditions and jitter sweep) trains them all."""
+    demo, paper = merged_config(scratch), merged_config(scratch, *PRESETS["paper"])
+    assert demo["train"]["seeds"] == paper["train"]["seeds"] and paper["train"]["left_out"] == []
+    left_out = len(demo["train"]["left_out"])
+    for source, protocol, renderer in itertools.product(SOURCES, PROTOCOLS, RENDERERS):
+        jobs = {preset: dags[(preset, source, protocol, renderer)]["train"] for preset in ("demo", "paper")}
+        assert jobs["paper"] - jobs["demo"] == left_out * len(TASKS) * len(demo["train"]["seeds"])
 
 
 def test_a_dag_that_does_not_build_fails_with_the_reason(scratch, dags):

@@ -16,13 +16,19 @@ DAG to leave ill-posed cells out. Light enough for the Snakefile to import.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import pandas as pd
 
 from denali_pipe.cells import ALL
 from denali_pipe.experiments.jitter import CONDITION_PATTERN as JITTER_PATTERN
 from denali_pipe.experiments.jitter import centre_zone, jitter, jitter_fwhm
 from denali_pipe.geometry import gantry_row_col
+
+if TYPE_CHECKING:
+    # annotations only: every `denali` verb's parser imports this module for
+    # its choices, and pandas would cost each job ~0.3 CPU-s (docs/performance.md)
+    import pandas as pd
 
 # condition -> (sample-table column, value)
 ATTRIBUTES = {

@@ -87,6 +87,30 @@ def check_models(models: dict, benchmark_model: str) -> dict[str, dict]:
     return registered
 
 
+def check_left_out(left_out: list[dict], models: dict, benchmark_model: str) -> dict[str, str]:
+    """`train.left_out` as {model: reason}, in config order: the registered
+    models a preset does not train for Tables 2 and 10 and the
+    speed-vs-accuracy chart, which print each one's row as absent with its
+    reason. `models` is the config's `train.models`: an entry naming a model
+    set to null there is dropped (the model is gone from every table).
+    ValueError naming the key when an entry names no model of it, names one
+    twice, or names `benchmark_model` (Table 5 and the one-model experiments
+    train it)."""
+    reasons: dict[str, str] = {}
+    for entry in left_out:
+        name = entry["model"]
+        if name not in models:
+            raise ValueError(f"train.left_out: {name!r} is not a model of {KEY} ({', '.join(models)})")
+        if models[name] is None:
+            continue
+        if name in reasons:
+            raise ValueError(f"train.left_out: {name!r} is named twice")
+        if name == benchmark_model:
+            raise ValueError(f"train.left_out: {name!r} is train.benchmark_model, which Table 5 and the one-model experiments train")
+        reasons[name] = entry["reason"]
+    return reasons
+
+
 def load_factory(name: str, path: str) -> Callable:
     """The factory callable of model `name` at import path `path`
     ('package.module:factory'). ValueError naming `train.models.<name>.factory`

@@ -109,6 +109,13 @@ def partition(samples: pd.DataFrame, y: np.ndarray, cell: Cell, validation_fract
     return Split(inner.train, split.test), inner.test
 
 
+def training_device(cuda_available: bool) -> str:
+    """The torch device a network trains on: `cuda` (the first GPU, or the
+    one SLURM's --gpus gives the job) whenever torch sees one, else `cpu`.
+    The cells, their tables and Table 10's timings record which."""
+    return "cuda" if cuda_available else "cpu"
+
+
 def infer(model: nn.Module, x: torch.Tensor, device: torch.device | str = "cpu") -> np.ndarray:
     """The model's outputs (N, C) for x (N, ...) in eval mode, in batches of
     EVAL_BATCH moved to `device`: positions in metres or logits."""

@@ -20,7 +20,7 @@ def cmd_train(args: argparse.Namespace) -> None:
     from denali_pipe.conditions import condition_view
     from denali_pipe.dataset import read_dataset
     from denali_pipe.saved_cell import MODEL_FILE
-    from denali_pipe.train import Hyper, run_cell
+    from denali_pipe.train import Hyper, run_cell, training_device
 
     torch.set_num_threads(args.threads)
     cell = Cell(**args.cell)
@@ -37,7 +37,7 @@ def cmd_train(args: argparse.Namespace) -> None:
     elif args.factory is None:
         raise ValueError(f"train: model {cell.model!r} is a network and needs --factory 'package.module:factory'")
     else:
-        device = "cuda" if torch.cuda.is_available() else "cpu"
+        device = training_device(torch.cuda.is_available())
         result = run_cell(x, samples, cell, Hyper(**args.hyper), args.validation_fraction, args.factory, device, args.budget_seconds)
     with atomic_dir(Path(args.outdir)) as tmp:
         (tmp / METRICS_FILE).write_text(result.metrics.to_json())

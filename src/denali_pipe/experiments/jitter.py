@@ -21,12 +21,14 @@ from __future__ import annotations
 
 import math
 import re
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from denali_pipe.geometry import BIN_WIDTH_PS, RESOLUTIONS
-from denali_pipe.report.runs import METRICS, seed_stats
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 RESOLUTION = "3x3"  # the captures whose centre zone the sweep blurs
 FWHM_PER_SIGMA = 2.0 * math.sqrt(2.0 * math.log(2.0))
@@ -89,6 +91,12 @@ def jitter_curve(runs: pd.DataFrame) -> pd.DataFrame:
     one row per task, metric (the paper's table metrics) and FWHM, with
     fwhm_bins, the mean and std over seeds, n_seeds and the trivial
     predictor's mean (training mean position or majority class)."""
+    # imported here: `conditions` (and through it every verb's parser) imports
+    # this module, and pandas costs each job ~0.3 CPU-s
+    import pandas as pd
+
+    from denali_pipe.report.runs import METRICS, seed_stats
+
     fwhm = runs["condition"].map(jitter_fwhm)
     if fwhm.isna().any():
         raise ValueError(f"not jitter cells: conditions {sorted(set(runs['condition'][fwhm.isna()]))}")

@@ -93,6 +93,11 @@ def _paper_value(paper: dict, key: str, name: str):
     return NA if v is None else v
 
 
+def left_out_note(reason: str) -> str:
+    """What a table prints in the row of a model the preset does not train."""
+    return f"not trained on this preset: {reason}"
+
+
 def protocol_of(runs: pd.DataFrame) -> str:
     protocols = sorted(runs["protocol"].unique())
     if len(protocols) != 1:

@@ -1,6 +1,7 @@
 """Speed vs accuracy: per task, training time (log axis) against the headline
 metric for every model, error bars over seeds, the Pareto front marked, and
-the predict-the-mean / majority baseline as a reference line."""
+the predict-the-mean / majority baseline as a reference line; the models the
+preset leaves out (config `train.left_out`) named under the title."""
 
 from __future__ import annotations
 
@@ -43,7 +44,8 @@ def speed_vs_accuracy_table(runs: pd.DataFrame) -> pd.DataFrame:
     return pd.concat(rows, ignore_index=True)
 
 
-def write_speed_vs_accuracy(metrics_paths: list[Path], out: Path) -> None:
+def write_speed_vs_accuracy(metrics_paths: list[Path], out: Path, left_out: dict[str, str] | None = None) -> None:
+    """left_out: {model: reason} of the registered models not trained."""
     runs = load_runs(metrics_paths)
     protocol = protocol_of(runs)
     table = speed_vs_accuracy_table(runs)
@@ -65,6 +67,9 @@ def write_speed_vs_accuracy(metrics_paths: list[Path], out: Path) -> None:
         ax.set_title(task, fontsize=9)
         ax.grid(alpha=0.3, which="both")
     axes[0][0].legend(fontsize=6)
-    fig.suptitle(f"speed vs accuracy ({runs['resolution'].iloc[0]}, random split, {protocol} protocol; filled: Pareto front)", fontsize=9)
+    title = f"speed vs accuracy ({runs['resolution'].iloc[0]}, random split, {protocol} protocol; filled: Pareto front)"
+    if left_out:
+        title += f"\nnot trained on this preset: {', '.join(left_out)} (Table 2 says why)"
+    fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     save_figure(fig, out, table.assign(protocol=protocol))

@@ -2,7 +2,9 @@
 FLOPs per sample, data sizes, training and inference cost, beside the
 paper's (which prints no FLOPs). Hours are measured wall-clock of our cells (mean
 over seeds), on the device each cell ran on; `epochs` is the configured
-count and `epochs_run` what the time budget allowed (mean over seeds)."""
+count and `epochs_run` what the time budget allowed (mean over seeds). A
+model the preset leaves out (config `train.left_out`) keeps its rows, ours
+n/a beside the paper's, with the reason in `note`."""
 
 from __future__ import annotations
 
@@ -13,10 +15,11 @@ import pandas as pd
 from denali_pipe.atomic import atomic_file
 from denali_pipe.cells import TASKS
 from denali_pipe.report.paper import TABLE10, TABLE10_COLUMNS
-from denali_pipe.report.runs import load_runs, protocol_of, seed_stats
+from denali_pipe.report.runs import NA, left_out_note, load_runs, protocol_of, seed_stats
 
 
-def write_table10(metrics_paths: list[Path], out: Path) -> None:
+def write_table10(metrics_paths: list[Path], out: Path, left_out: dict[str, str] | None = None) -> None:
+    """left_out: {model: reason} of the registered models not trained (rows after the trained ones)."""
     runs = load_runs(metrics_paths)
     runs["train_hours"] = runs["train_seconds"] / 3600
     runs["inference_hours"] = runs["inference_seconds"] / 3600
@@ -51,8 +54,17 @@ def write_table10(metrics_paths: list[Path], out: Path) -> None:
             row["validation_size"] = int(r["n_validation"])
             row["device"] = r["device"]
             row["n_seeds"] = int(s["n_seeds"])
+            row["note"] = ""
             rows.append(row)
+    for model, reason in (left_out or {}).items():
+        for task in TASKS:
+            paper = TABLE10.get((model, task), {})
+            rows.append(
+                {"model": model, "task": task, **{f"paper_{c}": paper.get(c, "") for c in TABLE10_COLUMNS}, "n_seeds": 0, "note": left_out_note(reason)}
+            )
     table = pd.DataFrame(rows)
+    ours = [c for c in table.columns if c not in ("model", "task", "n_seeds", "note") and not c.startswith("paper_")]
+    table[ours] = table[ours].astype(object).where(table["note"] == "", NA)
     table.insert(2, "protocol", protocol_of(runs))
     with atomic_file(out) as tmp:
         table.to_csv(tmp, index=False, float_format="%.6g")

@@ -78,12 +78,16 @@ def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out
     section (renderer, albedos, material, footprint, table and the chosen
     renderer's settings)}. calibration: twin_calibration.json (`twin.calibrate`):
     its footprints, time offset and lobe replace the design's."""
-    from denali_pipe.twin.calibrate import read_calibration
-
     settings = config["twin"]
     cal = load_calibration(scene_json)
     mesh = object_mesh(spec, size)
-    fitted = read_calibration(calibration) if calibration is not None else None
+    fitted = None
+    if calibration is not None:
+        # imported only here: the calibration's module (pandas, scipy.optimize)
+        # costs each design twin's job ~0.6 CPU-s it does not use
+        from denali_pipe.twin.calibrate import read_calibration
+
+        fitted = read_calibration(calibration)
     seed = twin_seed(config["seed"], spec, size)
     histograms, footprints, seconds = {}, {}, np.zeros(len(cal.locations))
     for res in config["resolutions"]:

@@ -15,6 +15,17 @@ from denali_pipe.twin.llvm import configure_llvm
 VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb")
 
 
+def resolve_variant(variant: str, cuda_available: bool) -> str:
+    """The Mitsuba variant to set for config `variant`: `auto` is
+    `cuda_ad_rgb` when drjit finds a CUDA device, else `llvm_ad_rgb`; a
+    named variant is itself. ValueError for an unknown variant."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown Mitsuba variant {variant!r}; expected one of {list(VARIANTS)}")
+    if variant == "auto":
+        return "cuda_ad_rgb" if cuda_available else "llvm_ad_rgb"
+    return variant
+
+
 def load_mitsuba(variant: str = "auto") -> ModuleType:
     """Set the Mitsuba variant (`auto`: CUDA when drjit finds a GPU, else
     LLVM), import mitransient, and return the `mitsuba` module.
@@ -22,8 +33,7 @@ def load_mitsuba(variant: str = "auto") -> ModuleType:
     Raises FileNotFoundError (from `llvm.configure_llvm`) when the LLVM
     backend is needed and no usable libLLVM is installed, ValueError for an
     unknown variant or when another variant is already set in this process."""
-    if variant not in VARIANTS:
-        raise ValueError(f"unknown Mitsuba variant {variant!r}; expected one of {list(VARIANTS)}")
+    resolve_variant(variant, cuda_available=False)  # an unknown variant fails before drjit loads
     try:
         configure_llvm()  # before drjit is imported: it reads the variable once
         llvm_error = None
@@ -31,8 +41,7 @@ def load_mitsuba(variant: str = "auto") -> ModuleType:
         llvm_error = e
     import drjit as dr
 
-    if variant == "auto":
-        variant = "cuda_ad_rgb" if dr.has_backend(dr.JitBackend.CUDA) else "llvm_ad_rgb"
+    variant = resolve_variant(variant, dr.has_backend(dr.JitBackend.CUDA))
     if variant.startswith("llvm") and llvm_error is not None:
         raise llvm_error
     import mitsuba as mi
