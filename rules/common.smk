@@ -368,13 +368,13 @@ def capture_set_work(name):
     return set_work(len(planned_locations()), config["rig"]["repeats"], resolution, *FRAME_PIXELS)
 
 
-def job_work(rule, wildcards):
+def job_work(rule_name, wildcards):
     """The work of a rig job (its object and size: every resolution and
     lighting), a per-set job, or a training cell (an upper bound: the whole
     dataset, not its training split, times the cell's epochs)."""
-    if rule == "rig":
+    if rule_name == "rig":
         return combine([capture_set_work(f"{wildcards.object}_{wildcards.size}_{r}_{li}") for r in config["resolutions"] for li in config["lightings"]])
-    if rule != "train":
+    if rule_name != "train":
         return capture_set_work(wildcards.set)
     samples = len(planned_samples(wildcards.res)) * config["rig"]["repeats"]
     epochs = json.loads(shlex.split(hyper_arg(wildcards))[0]).get("epochs", 1)
@@ -383,19 +383,19 @@ def job_work(rule, wildcards):
     return work
 
 
-def job_speedup(rule):
-    return CLUSTER["gpu_speedup"] if rule == "train" and TRAIN["gpus"] > 0 else 1.0
+def job_speedup(rule_name):
+    return CLUSTER["gpu_speedup"] if rule_name == "train" and TRAIN["gpus"] > 0 else 1.0
 
 
-def request_runtime(rule):
+def request_runtime(rule_name):
     """`runtime` (minutes) of a rule's jobs: predicted CPU seconds x headroom."""
     return lambda wildcards: runtime_minutes(
-        predict(cost_model(COSTS, rule, wildcards.get("model"), wildcards.get("task"))["cpu_s"], job_work(rule, wildcards)), CLUSTER, job_speedup(rule)
+        predict(cost_model(COSTS, rule_name, wildcards.get("model"), wildcards.get("task"))["cpu_s"], job_work(rule_name, wildcards)), CLUSTER, job_speedup(rule_name)
     )
 
 
-def request_mem_mb(rule):
+def request_mem_mb(rule_name):
     """`mem_mb` of a rule's jobs: predicted peak RSS x headroom."""
     return lambda wildcards: mem_mb(
-        predict(cost_model(COSTS, rule, wildcards.get("model"), wildcards.get("task"))["rss_mb"], job_work(rule, wildcards)), CLUSTER
+        predict(cost_model(COSTS, rule_name, wildcards.get("model"), wildcards.get("task"))["rss_mb"], job_work(rule_name, wildcards)), CLUSTER
     )

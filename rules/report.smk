@@ -20,8 +20,10 @@ rule table2:
         report("results/table2.csv", caption="../report/table2.rst", category="3. Training"),
     log:
         "logs/report/table2.log",
+    params:
+        left_out=LEFT_OUT_ARG,
     shell:
-        "{DENALI} report table2 {input} {LEFT_OUT_ARG} --out {output} > {log} 2>&1"
+        "{DENALI} report table2 {input} {params.left_out} --out {output} > {log} 2>&1"
 
 
 rule table10:
@@ -31,8 +33,10 @@ rule table10:
         report("results/table10.csv", caption="../report/table10.rst", category="3. Training"),
     log:
         "logs/report/table10.log",
+    params:
+        left_out=LEFT_OUT_ARG,
     shell:
-        "{DENALI} report table10 {input} {LEFT_OUT_ARG} --out {output} > {log} 2>&1"
+        "{DENALI} report table10 {input} {params.left_out} --out {output} > {log} 2>&1"
 
 
 rule speed_vs_accuracy:
@@ -43,8 +47,10 @@ rule speed_vs_accuracy:
         csv="results/speed_vs_accuracy.csv",
     log:
         "logs/report/speed_vs_accuracy.log",
+    params:
+        left_out=LEFT_OUT_ARG,
     shell:
-        "{DENALI} report speed-vs-accuracy {input} {LEFT_OUT_ARG} --out {output.png} > {log} 2>&1"
+        "{DENALI} report speed-vs-accuracy {input} {params.left_out} --out {output.png} > {log} 2>&1"
 
 
 rule training_curves:
