@@ -390,7 +390,9 @@ def job_speedup(rule_name):
 def request_runtime(rule_name):
     """`runtime` (minutes) of a rule's jobs: predicted CPU seconds x headroom."""
     return lambda wildcards: runtime_minutes(
-        predict(cost_model(COSTS, rule_name, wildcards.get("model"), wildcards.get("task"))["cpu_s"], job_work(rule_name, wildcards)), CLUSTER, job_speedup(rule_name)
+        predict(cost_model(COSTS, rule_name, wildcards.get("model"), wildcards.get("task"))["cpu_s"], job_work(rule_name, wildcards)),
+        CLUSTER,
+        job_speedup(rule_name),
     )
 
 
