@@ -193,7 +193,9 @@ def fit_models(jobs: pd.DataFrame) -> dict:
     fitted = {}
     for rule, group in jobs.groupby("rule"):
         if rule == "train":
-            fitted[rule] = fit_cells(group)
+            cells = fit_cells(group)
+            # a network never measured gets the 1D CNN's model (costs.cost_model's `default`)
+            fitted[rule] = {**cells, "default": cells["cnn1d"]}
         else:
             fitted[rule] = {"cpu_s": fit_linear(group, CPU_TERMS[rule], "cpu_s"), "rss_mb": fit_linear(group, RSS_TERMS[rule], "rss_mb")}
     return fitted
@@ -221,16 +223,10 @@ def fit_cells(cells: pd.DataFrame, reference: str = "cnn1d") -> dict:
     return fitted
 
 
-def model_of(fitted: dict, rule: str, model: str = "", task: str = "") -> dict:
-    """A rule's fitted models; a training cell's: its network and task's, else its network's, else the 1D CNN's."""
-    if rule != "train":
-        return fitted[rule]
-    cells = fitted["train"]
-    return cells.get(f"{model}_{task}") or cells.get(model) or cells["cnn1d"]
-
-
 def predicted(jobs: pd.DataFrame, fitted: dict, kind: str) -> np.ndarray:
-    return np.array([costs.predict(model_of(fitted, r.rule, r.model, r.task)[kind], {t: r[t] for t in costs.TERMS}) for _, r in jobs.iterrows()])
+    return np.array(
+        [costs.predict(costs.cost_model({"rules": fitted}, r.rule, r.model, r.task)[kind], {t: r[t] for t in costs.TERMS}) for _, r in jobs.iterrows()]
+    )
 
 
 # --- printing ---------------------------------------------------------------------
@@ -387,7 +383,7 @@ def paper_jobs(nodes: dict, parents: dict, cfg: dict, jobs: pd.DataFrame) -> dic
 def job_cost(job: dict, fitted: dict, kind: str) -> float | None:
     if job["work"] is None or job["rule"] not in fitted:
         return None
-    return max(0.0, costs.predict(model_of(fitted, job["rule"], job["model"], job["task"])[kind], job["work"]))
+    return max(0.0, costs.predict(costs.cost_model({"rules": fitted}, job["rule"], job["model"], job["task"])[kind], job["work"]))
 
 
 def bottom_levels(durations: dict[int, float], parents: dict[int, list[int]]) -> dict[int, float]:
@@ -489,14 +485,13 @@ def print_projection(fitted: dict, jobs: pd.DataFrame, args: argparse.Namespace)
 
 
 def write_cost_table(path: Path, fitted: dict, runs: list[str]) -> None:
-    """The cost table the rules' SLURM requests come from (denali_pipe.costs);
-    a network never measured gets the 1D CNN's model as `default`."""
+    """The cost table the rules' SLURM requests come from (denali_pipe.costs)."""
 
     def rounded(m):
         return {k: rounded(v) if isinstance(v, dict) else float(f"{v:.4g}") for k, v in m.items()}
 
     rules = {r: rounded(m) for r, m in fitted.items() if r != "train"}
-    rules["train"] = rounded({**fitted["train"], "default": fitted["train"]["cnn1d"]})
+    rules["train"] = rounded(fitted["train"])
     header = (
         "# Per-job cost models (CPU seconds, peak RSS in MB) linear in each job's work\n"
         "# (src/denali_pipe/costs.py), fitted on the runs below by\n"
