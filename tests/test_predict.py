@@ -12,8 +12,8 @@ import torch
 
 from denali_pipe.cli import main
 from denali_pipe.evaluate import load_cell, predict
-from denali_pipe.predict import capture_features, predict_capture, read_capture, softmax
-from denali_pipe.preprocess import crop_window, preprocess
+from denali_pipe.predict import capture_features, predict_capture, read_background, read_capture, softmax
+from denali_pipe.preprocess import background_means, crop_window, preprocess
 from denali_pipe.train import Hyper, run_cell
 
 N, BINS, REPEATS, LOCATION = 3, 128, 3, 37
@@ -34,21 +34,21 @@ def rig(tmp_path_factory):
     cells of the three tasks trained on features of the window's length."""
     root = tmp_path_factory.mktemp("predict")
     rng = np.random.default_rng(3)
-    bg, capture = background_counts(rng), background_counts(rng, shift=1)
+    bg, capture = {k: background_counts(rng) for k in (LOCATION - 1, LOCATION)}, background_counts(rng, shift=1)
     capture = capture + rng.poisson(300 * np.exp(-0.5 * ((np.arange(BINS) - 60) / 3.0) ** 2), size=capture.shape).astype(np.int32)
-    window = crop_window([bg[None]])
+    window = crop_window([bg[LOCATION][None]])
     (root / "crop_3x3.json").write_text(json.dumps(window.to_dict()))
     paths = {}
-    for name, counts in (("bg", bg), ("obj", capture)):
+    for name, by_location in (("bg", bg), ("obj", {k: capture for k in bg})):
         d = root / f"{name}_NLOSdata" / "spad_histogram"
         d.mkdir(parents=True)
-        np.save(d / f"{LOCATION:03d}.npy", counts)
         cam = {"aligned_depth_image": np.zeros((2, 2), np.uint16), "aligned_rgb_image": np.zeros((2, 2, 3), np.uint8)}
         with open(root / f"{name}.pkl", "wb") as f:
             pickle.dump({"metadata": {"object": name}}, f)
-            for k in (LOCATION - 1, LOCATION):
+            for k, counts in by_location.items():
+                np.save(d / f"{k:03d}.npy", counts)
                 pickle.dump({"iter": k, "histogram": counts, "spad_realsense_data": cam, "tracking_realsense_data": cam}, f)
-        paths[name] = (d / f"{LOCATION:03d}.npy", root / f"{name}.pkl")
+        paths[name] = (d / f"{LOCATION:03d}.npy", root / f"{name}.pkl", d.parent)
     t = BINS - window.crop_start
     rows = [{"class": c, "size": s, "light": "lighton", "location": k, "repeat": r, "x": 1.0 + 0.01 * k, "y": 0.3 + 0.01 * (k % 3)}
             for c in CLASSES for s in ("4inch", "8inch") for k in range(8) for r in range(3)]  # fmt: skip
@@ -64,20 +64,29 @@ def rig(tmp_path_factory):
         run.mkdir(parents=True)
         torch.save(result.state, run / "model.pt")
         runs[task] = run
-    return {"root": root, "paths": paths, "window": window, "runs": runs, "bg": bg, "capture": capture}
+    return {"root": root, "paths": paths, "window": window, "runs": runs, "bg": np.stack([bg[k] for k in sorted(bg)]), "capture": capture}
 
 
 def test_features_are_the_pipelines_preprocessing_of_the_capture(rig):
     capture = read_capture(rig["paths"]["obj"][0])
-    background = read_capture(rig["paths"]["bg"][0], capture.location)
+    background = read_background(rig["paths"]["bg"][2], capture.location)
     assert capture.location == LOCATION and np.array_equal(capture.counts, rig["capture"])
+    assert background.n_locations == 2
     f = capture_features(capture, background, rig["window"])
-    expected = preprocess(rig["capture"][None], np.array([LOCATION]), rig["bg"][None], np.array([LOCATION]), rig["window"]).values[0]
+    locations = np.array([LOCATION - 1, LOCATION])
+    expected = preprocess(rig["capture"][None], np.array([LOCATION]), background_means(rig["bg"]), locations, rig["window"]).values[0]
     assert np.array_equal(f, expected) and f.shape == (REPEATS, N, N, BINS - rig["window"].crop_start)
 
 
+def test_a_background_of_one_capture_is_its_plain_mean(rig):
+    background = read_background(rig["paths"]["bg"][0], LOCATION)
+    assert background.n_locations == 1 and np.array_equal(background.counts, rig["bg"][1].mean(axis=0))
+    with pytest.raises(ValueError, match="no capture at gantry location 5"):
+        read_background(rig["paths"]["bg"][2], 5)
+
+
 def test_predict_averages_each_cells_answer_over_the_repeats(rig):
-    capture, background = read_capture(rig["paths"]["obj"][0]), read_capture(rig["paths"]["bg"][0], LOCATION)
+    capture, background = read_capture(rig["paths"]["obj"][0]), read_background(rig["paths"]["bg"][2], LOCATION)
     cells = [(run, load_cell(run)) for run in rig["runs"].values()]
     record = predict_capture(cells, capture, background, rig["window"])
     f = capture_features(capture, background, rig["window"])
@@ -94,20 +103,29 @@ def test_predict_averages_each_cells_answer_over_the_repeats(rig):
 def test_the_cli_prints_the_same_json_from_a_release_file_or_a_stream_record(rig, capsys):
     runs = [str(r) for r in rig["runs"].values()]
     crop = str(rig["root"] / "crop_3x3.json")
-    (obj_npy, obj_pkl), (bg_npy, bg_pkl) = rig["paths"]["obj"], rig["paths"]["bg"]
-    assert main(["predict", *runs, str(obj_npy), "--background", str(bg_npy), "--crop", crop]) == 0
+    (obj_npy, obj_pkl, _), (_, bg_pkl, bg_dir) = rig["paths"]["obj"], rig["paths"]["bg"]
+    assert main(["predict", *runs, str(obj_npy), "--background", str(bg_dir), "--crop", crop]) == 0
     from_npy = json.loads(capsys.readouterr().out)
     assert main(["predict", *runs, str(obj_pkl), "--background", str(bg_pkl), "--crop", crop, "--location", str(LOCATION)]) == 0
     from_pkl = json.loads(capsys.readouterr().out)
     drop = ("capture", "background")
     assert {k: v for k, v in from_npy.items() if k not in drop} == {k: v for k, v in from_pkl.items() if k not in drop}
     assert from_npy["gantry_location"] == LOCATION and from_npy["repeats"] == [0, 1, 2] and len(from_npy["shape"]["top5"]) == 3
+    assert from_npy["background_locations"] == 2
+
+
+def test_the_cli_warns_that_one_background_capture_keeps_its_noise(rig, capsys, caplog):
+    runs = [str(r) for r in rig["runs"].values()]
+    (obj_npy, *_), (bg_npy, *_) = rig["paths"]["obj"], rig["paths"]["bg"]
+    assert main(["predict", *runs, str(obj_npy), "--background", str(bg_npy), "--crop", str(rig["root"] / "crop_3x3.json")]) == 0
+    assert json.loads(capsys.readouterr().out)["background_locations"] == 1
+    assert "keeps its shot noise" in caplog.text
 
 
 def test_what_predict_refuses(rig, tmp_path, caplog):
     runs = [str(r) for r in rig["runs"].values()]
     crop = str(rig["root"] / "crop_3x3.json")
-    (obj_npy, obj_pkl), (bg_npy, _) = rig["paths"]["obj"], rig["paths"]["bg"]
+    (obj_npy, obj_pkl, _), (bg_npy, *_) = rig["paths"]["obj"], rig["paths"]["bg"]
     assert main(["predict", *runs, str(obj_pkl), "--background", str(bg_npy), "--crop", crop]) == 1
     assert "holds 2 gantry locations; give the location" in caplog.text
     assert main(["predict", *runs, str(obj_pkl), "--background", str(bg_npy), "--crop", crop, "--location", "5"]) == 1

@@ -27,10 +27,10 @@ def test_alignment_undoes_whole_bin_shifts():
     shifts = np.array([[0, 2, -1], [3, 0, 0], [0, 0, -2], [1, 1, -5]])
     bg = _set(seed=1)
     h = _set(shift=shifts, seed=2)
-    found = pp.alignment_shifts(h, bg)
+    found = pp.alignment_shifts(h, bg.mean(axis=1))
     assert np.array_equal(found, -shifts)
     aligned = pp.shift_bins(h, found)
-    assert np.array_equal(pp.alignment_shifts(aligned, bg), np.zeros_like(shifts))
+    assert np.array_equal(pp.alignment_shifts(aligned, bg.mean(axis=1)), np.zeros_like(shifts))
 
 
 def test_shift_fills_with_the_edge_floor_not_wrapped_counts():
@@ -46,13 +46,13 @@ def test_alignment_refuses_absurd_shifts():
     bg = _set(seed=1)
     h = _set(shift=np.full((4, 3), pp.MAX_SHIFT_BINS + 3), seed=2)
     with pytest.raises(ValueError, match="bins off the background"):
-        pp.alignment_shifts(h, bg)
+        pp.alignment_shifts(h, bg.mean(axis=1))
 
 
 def test_subtraction_leaves_the_bump_and_zero_mean_noise():
     bg = _set(seed=1)
     h = _set(bump=200.0, seed=2)
-    d = pp.subtract_background(h, bg)
+    d = pp.subtract_background(h, bg.mean(axis=1))
     assert d.dtype == np.float32
     assert d[..., 1, 1, 90:95].mean() == pytest.approx(200, abs=25)
     assert abs(d[..., 0, 0, 100:].mean()) < 10
@@ -60,7 +60,62 @@ def test_subtraction_leaves_the_bump_and_zero_mean_noise():
 
 def test_subtraction_shape_mismatch_is_an_error():
     with pytest.raises(ValueError, match="do not match"):
-        pp.subtract_background(_set(L=4), _set(L=3))
+        pp.subtract_background(_set(L=4), _set(L=3).mean(axis=1))
+
+
+def test_hard_threshold_is_four_over_root_three_for_a_square_matrix():
+    assert pp.hard_threshold(1.0) == pytest.approx(4 / np.sqrt(3))
+    assert pp.hard_threshold(1e-9) == pytest.approx(np.sqrt(2), rel=1e-6)
+
+
+def _mount_return(L):
+    """(L,) counts of a mount's return that changes smoothly with location."""
+    return 300.0 + 250.0 * np.sin(np.linspace(0, 3, L))
+
+
+def _background_truth(L=60, n=3):
+    base = np.stack([_pulse(at=45 + 2 * z) for z in range(n * n)]).reshape(n, n, -1)
+    truth = np.broadcast_to(base, (L, n, n, 128)).copy()
+    truth[..., 1, 1, 90:95] += _mount_return(L)[:, None]
+    return truth
+
+
+def test_background_means_remove_shot_noise_and_keep_what_varies_with_location():
+    truth = _background_truth()
+    bg = np.random.default_rng(4).poisson(np.broadcast_to(truth[:, None], (60, 3, 3, 3, 128)))
+    plain = bg.mean(axis=1)
+    clean = pp.background_means(bg)
+    assert clean.shape == plain.shape
+    # the plain mean keeps all of one capture's shot noise, the low-rank one a few per cent
+    assert np.sqrt(((clean - truth) ** 2).mean()) < 0.3 * np.sqrt(((plain - truth) ** 2).mean())
+    mount = clean[..., 1, 1, 90:95].mean(axis=-1) - clean[..., 1, 1, 100:120].mean(axis=-1)
+    assert np.abs(mount - _mount_return(60)).max() < 0.1 * _mount_return(60).mean()
+
+
+def test_background_means_are_the_plain_mean_without_locations_or_repeats_to_compare():
+    bg = _set(L=1, seed=1)
+    assert np.array_equal(pp.background_means(bg), bg.mean(axis=1))
+    bg = _set(L=4, R=1, seed=1)
+    assert np.array_equal(pp.background_means(bg), bg.mean(axis=1))
+
+
+def test_sets_at_one_location_share_no_background_noise():
+    """Two object sets at the same locations, minus one background: their
+    residuals in bins with no return must not correlate (a location
+    fingerprint a model would learn), as they do with the plain mean."""
+    L, n = 60, 3
+    truth = _background_truth(L, n)
+    rng = np.random.default_rng(6)
+    draw = lambda: rng.poisson(np.broadcast_to(truth[:, None], (L, 3, n, n, 128)))  # noqa: E731
+    bg, a, b = draw(), draw(), draw()
+
+    def shared(background):
+        ra, rb = (pp.subtract_background(h, background).mean(axis=1)[..., 100:] for h in (a, b))
+        ra, rb = (r - r.mean(axis=0) for r in (ra, rb))
+        return np.mean([np.corrcoef(ra[i].ravel(), rb[i].ravel())[0, 1] for i in range(L)])
+
+    assert shared(bg.mean(axis=1)) > 0.4
+    assert abs(shared(pp.background_means(bg))) < 0.1
 
 
 def test_crop_window_starts_each_zone_after_its_direct_return():
@@ -98,6 +153,7 @@ def test_preprocess_matches_locations_crops_and_masks_late_zones():
     starts = np.full((3, 3), 80)
     starts[2, 2] = 85
     window = pp.CropWindow(80, starts)
+    bg = pp.background_means(bg)
     f = pp.preprocess(h, np.array([7, 3, 9]), bg, np.array([3, 5, 7, 9]), window)
     assert f.values.shape == (3, 3, 3, 3, 48)
     assert f.values[..., 1, 1, 10:15].mean() == pytest.approx(150, abs=25)
@@ -134,5 +190,5 @@ def test_alignment_works_on_photon_starved_8x8_zones():
     base = np.stack([_pulse(at=43 + z % 8 * 2, height=1.5, floor=0.6) for z in range(64)]).reshape(8, 8, -1)
     bg = rng.poisson(np.broadcast_to(base, (4, 3, 8, 8, 128)))
     h = rng.poisson(np.broadcast_to(np.roll(base, 2, axis=-1), (4, 3, 8, 8, 128)))
-    found = pp.alignment_shifts(h, bg)
+    found = pp.alignment_shifts(h, bg.mean(axis=1))
     assert (found == -2).mean() >= 0.75 and np.abs(found + 2).max() <= 1

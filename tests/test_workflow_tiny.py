@@ -313,7 +313,7 @@ def test_predict_and_export_a_tiny_capture_as_training_saw_it(tiny_run, tmp_path
     rows = samples.index[(samples.set == set_name) & (samples.location == location)]
     runs = [results / f"runs/clean/3x3/all/random/cnn1d_{task}/seed42" for task in ("location", "shape", "size")]
     capture = tiny_run / f"data/raw/{set_name}_NLOSdata/spad_histogram/{location:03d}.npy"
-    background = tiny_run / f"data/raw/NOOBJECT_8inch_3x3_lighton_NLOSdata/spad_histogram/{location:03d}.npy"
+    background = tiny_run / "data/raw/NOOBJECT_8inch_3x3_lighton_NLOSdata"
     args = [*map(str, runs), str(capture), "--background", str(background), "--crop", str(results / "features/crop_3x3.json")]
     assert main(["predict", *args]) == 0
     out = json.loads(capsys.readouterr().out)

@@ -4,10 +4,11 @@ answer as one JSON-ready record (`denali predict`).
 
 Preprocessing is the pipeline's (preprocess.py), for one gantry location:
 the capture's repeats are aligned with the background's direct return,
-the background (the NOOBJECT set's mean over its repeats at the same location,
-resolution and lighting) is subtracted, and the histograms are cropped to the
-resolution's window (results/features/crop_<res>.json); each cell then applies
-its own normalisation (evaluate.predict). Outputs are averaged over the
+the background (the NOOBJECT set of the same resolution and lighting, at the
+same location, with its shot noise removed across the set's locations) is
+subtracted, and the histograms are cropped to the resolution's window
+(results/features/crop_<res>.json); each cell then applies its own
+normalisation (evaluate.predict). Outputs are averaged over the
 repeats used: positions in metres, class probabilities (softmax of the logits).
 """
 
@@ -21,7 +22,8 @@ import numpy as np
 
 from denali_pipe.evaluate import TrainedCell, predict
 from denali_pipe.io.pickle_stream import iter_records
-from denali_pipe.preprocess import CropWindow, preprocess
+from denali_pipe.io.release import histogram_files
+from denali_pipe.preprocess import CropWindow, background_means, preprocess
 
 BINS = 128  # the sensor's histogram length
 ZONES = (3, 8)  # zones per side of the 3x3 and 8x8 modes
@@ -36,6 +38,18 @@ class Capture:
     counts: np.ndarray
     location: int
     source: str
+
+
+@dataclass(frozen=True)
+class Background:
+    """The background at one gantry location: counts (n, n, 128), the
+    NOOBJECT set's at `location` (preprocess.background_means, over the
+    `n_locations` locations read from `source`)."""
+
+    counts: np.ndarray
+    location: int
+    source: str
+    n_locations: int
 
 
 def _checked(counts: np.ndarray, source: str) -> np.ndarray:
@@ -72,6 +86,36 @@ def read_capture(path: Path, location: int | None = None) -> Capture:
     raise ValueError(f"{path}: not a capture (expected a release NNN.npy, a <set>.zarr store or a .pkl capture stream)")
 
 
+def read_background(path: Path, location: int) -> Background:
+    """The background at `location` from a whole NOOBJECT set, as the
+    pipeline computes it: a release folder `<set>_NLOSdata`, a store
+    `<set>.zarr` or a pickle stream. A single NNN.npy is read too, but one
+    capture gives its plain mean over repeats: its shot noise stays in the
+    features, where the training's backgrounds had it removed."""
+    path = Path(path)
+    if path.is_dir() and path.suffix != ".zarr":
+        files = histogram_files(path)
+        locations = list(files)
+        counts = [_checked(np.load(p, allow_pickle=False), str(p)) for p in files.values()]
+    elif path.suffix == ".zarr":
+        from denali_pipe.io.store import open_set
+
+        store = open_set(path)
+        locations, counts = [int(k) for k in store.locations], [_checked(h, str(path)) for h in store.histograms[...]]
+    elif path.suffix == ".pkl":
+        records = {int(rec["iter"]): rec["histogram"] for i, rec in iter_records(path) if i > 0}
+        locations, counts = list(records), [_checked(h, f"{path} (location {k})") for k, h in records.items()]
+    else:
+        one = read_capture(path, location)
+        locations, counts = [one.location], [one.counts]
+    if location not in locations:
+        raise ValueError(f"{path} has no capture at gantry location {location} (it has {sorted(locations)[:10]}{' ...' if len(locations) > 10 else ''})")
+    if len({c.shape for c in counts}) != 1:
+        raise ValueError(f"{path}: its captures differ in shape ({sorted({c.shape for c in counts})})")
+    means = background_means(np.stack(counts))
+    return Background(means[locations.index(location)], location, str(path), len(locations))
+
+
 def _only_location(path: Path, locations: list[int], wanted: int | None) -> int:
     if wanted is None:
         if len(locations) != 1:
@@ -82,9 +126,9 @@ def _only_location(path: Path, locations: list[int], wanted: int | None) -> int:
     return wanted
 
 
-def capture_features(capture: Capture, background: Capture, window: CropWindow) -> np.ndarray:
-    """(R, n, n, T) float32: the capture aligned, minus the background's
-    mean at the same location, cropped to `window` (preprocess.preprocess)."""
+def capture_features(capture: Capture, background: Background, window: CropWindow) -> np.ndarray:
+    """(R, n, n, T) float32: the capture aligned, minus the background at
+    the same location, cropped to `window` (preprocess.preprocess)."""
     if background.location != capture.location:
         raise ValueError(f"background {background.source} is gantry location {background.location}, the capture {capture.source} is {capture.location}")
     try:
@@ -116,7 +160,7 @@ def answer(trained: TrainedCell, features: np.ndarray) -> dict:
     return {"class": trained.classes[ranked[0]], "probabilities": {c: float(v) for c, v in zip(trained.classes, p)}}
 
 
-def predict_capture(cells: list[tuple[Path, TrainedCell]], capture: Capture, background: Capture, window: CropWindow, repeat: int | None = None) -> dict:
+def predict_capture(cells: list[tuple[Path, TrainedCell]], capture: Capture, background: Background, window: CropWindow, repeat: int | None = None) -> dict:
     """Every cell's answer for the capture (at most one cell per task), and
     what it was computed from: the capture, its location, the repeats
     averaged (all, or `repeat`), each task's run folder. `cells`: (run
@@ -130,7 +174,13 @@ def predict_capture(cells: list[tuple[Path, TrainedCell]], capture: Capture, bac
         if repeat not in repeats:
             raise ValueError(f"{capture.source}: no repeat {repeat} (it has {len(repeats)})")
         repeats = [repeat]
-    record = {"capture": capture.source, "background": background.source, "gantry_location": capture.location, "repeats": repeats}
+    record = {
+        "capture": capture.source,
+        "background": background.source,
+        "background_locations": background.n_locations,
+        "gantry_location": capture.location,
+        "repeats": repeats,
+    }
     for run_dir, trained in cells:
         record[trained.cell.task] = {**answer(trained, features[repeats]), "run": str(run_dir), "model": trained.cell.model}
     return record

@@ -8,9 +8,15 @@ each repeat stays a sample (as in the paper). Steps, per capture set:
    each histogram is shifted by whole bins until its direct return lines up
    with the background's at the same location. Sub-bin shifts are not
    applied: interpolation would blur the pulse more than the jitter it removes.
-2. Background subtraction: minus the mean over repeats of the `NOOBJECT` set
-   captured at the same location, resolution and lighting. What remains is
-   the object's three-bounce return plus noise (negative values kept).
+2. Background subtraction: minus the `NOOBJECT` set captured at the same
+   location, resolution and lighting (`background_means`). What remains is
+   the object's three-bounce return plus noise (negative values kept). One
+   background capture is subtracted from every object set at its location,
+   so its own shot noise would be a pattern shared by all of them, which a
+   model can learn as a fingerprint of the location. The background is
+   therefore the low-rank part of its captures across locations: what
+   varies with location above the noise (the mount's return, drifts) is
+   kept, the capture's own shot noise is not.
 3. Cropping: after subtraction each zone's direct return leaves its shot
    noise, sqrt(2 * counts) thousands of counts tall at the peak. Every zone
    keeps its bins from its own direct-return end (`CropWindow.zone_starts`):
@@ -50,6 +56,40 @@ SIGNIFICANCE = 5.0
 MAX_SHIFT_BINS = 8
 
 
+def hard_threshold(beta: float) -> float:
+    """Gavish & Donoho's optimal hard threshold lambda*(beta) for singular
+    values of an m x n matrix (beta = m / n <= 1) with known unit noise: keep
+    a singular value above lambda*(beta) sqrt(n) (IEEE Trans. Inf. Theory
+    60(8), 2014, eq. 11; 4/sqrt(3) for a square matrix)."""
+    return float(np.sqrt(2 * (beta + 1) + 8 * beta / (beta + 1 + np.sqrt(beta**2 + 14 * beta + 1))))
+
+
+def background_means(background: np.ndarray) -> np.ndarray:
+    """(L, n, n, B) float64: the background at each of its L locations, the
+    mean over repeats with its shot noise removed.
+
+    background: (L, R, n, n, B) counts of one NOOBJECT set. The repeat means
+    are whitened by each bin's noise (the repeats' scatter pooled over
+    locations, divided by R; at least one count's Poisson variance per
+    repeat), and their matrix (L, n n B) keeps the singular values above the
+    optimal hard threshold for unit noise (`hard_threshold`). The kept rank
+    carries what changes with location above the noise; one location's shot
+    noise spreads over every direction and only a share rank / (n n B) of it
+    stays. With one location or one repeat there is nothing to tell signal
+    from noise by, and the plain mean over repeats is returned."""
+    mean = background.mean(axis=1, dtype=np.float64)
+    n_loc, n_rep = background.shape[:2]
+    if n_loc < 2 or n_rep < 2:
+        return mean
+    var = background.astype(np.float64).var(axis=1, ddof=1).mean(axis=0) / n_rep
+    sd = np.sqrt(np.maximum(var, 1.0 / n_rep))
+    y = (mean / sd).reshape(n_loc, -1)
+    u, s, vt = np.linalg.svd(y, full_matrices=False)
+    m, n = sorted(y.shape)
+    rank = int((s > hard_threshold(m / n) * np.sqrt(n)).sum())
+    return ((u[:, :rank] * s[:rank]) @ vt[:rank]).reshape(mean.shape) * sd
+
+
 def shift_bins(hist: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     """Shift each histogram along its last axis by whole bins (positive = later),
     filling the vacated bins with the nearest edge value (the flat floor).
@@ -69,7 +109,7 @@ def shift_bins(hist: np.ndarray, shifts: np.ndarray) -> np.ndarray:
 
 def alignment_shifts(hist: np.ndarray, background: np.ndarray) -> np.ndarray:
     """Whole-bin shifts (L, R) that best align each histogram with the
-    background at the same location (mean over its repeats).
+    background (L, n, n, B) at the same location.
 
     A matched filter: the shift maximises the correlation of the shifted
     histogram, all zones together, with the background's floor-free profile,
@@ -79,8 +119,7 @@ def alignment_shifts(hist: np.ndarray, background: np.ndarray) -> np.ndarray:
     works on 8x8 zones that catch a few direct photons each.
 
     Raises ValueError when the best shift reaches MAX_SHIFT_BINS."""
-    template = background.mean(axis=1, dtype=np.float64)  # (L, n, n, B)
-    template = template - template[..., :FLOOR_BINS].mean(axis=-1, keepdims=True)
+    template = background - background[..., :FLOOR_BINS].mean(axis=-1, keepdims=True)
     h = hist.astype(np.float64)
     candidates = np.arange(-MAX_SHIFT_BINS, MAX_SHIFT_BINS + 1)
     scores = np.stack([np.einsum("lrijb,lijb->lr", np.roll(h, d, axis=-1), template) for d in candidates])
@@ -92,11 +131,11 @@ def alignment_shifts(hist: np.ndarray, background: np.ndarray) -> np.ndarray:
 
 
 def subtract_background(hist: np.ndarray, background: np.ndarray) -> np.ndarray:
-    """hist (L, R, n, n, B) minus the mean over repeats of background
-    (L, Rb, n, n, B) at the same locations; float32, negatives kept."""
-    if hist.shape[0] != background.shape[0] or hist.shape[2:] != background.shape[2:]:
+    """hist (L, R, n, n, B) minus background (L, n, n, B) at the same
+    locations; float32, negatives kept."""
+    if hist.shape[0] != background.shape[0] or hist.shape[2:] != background.shape[1:]:
         raise ValueError(f"histograms {hist.shape} and background {background.shape} do not match in locations, zones or bins")
-    return (hist.astype(np.float32) - background.mean(axis=1, dtype=np.float64)[:, None].astype(np.float32)).astype(np.float32)
+    return (hist.astype(np.float32) - background[:, None].astype(np.float32)).astype(np.float32)
 
 
 def direct_end(profile: np.ndarray, n_averaged: int, fraction: float = DIRECT_END_FRACTION) -> np.ndarray:
@@ -182,8 +221,9 @@ def preprocess(hist: np.ndarray, locations: np.ndarray, background: np.ndarray, 
     """Align, subtract the background at matching locations, crop to `window`
     (zeroing each zone's bins before its own start).
 
-    hist (L, R, n, n, B) and background (Lb, Rb, n, n, B) counts; the
-    background must cover every location of `locations`."""
+    hist (L, R, n, n, B) counts; background (Lb, n, n, B) the background set
+    at its locations (`background_means`), which must cover every location
+    of `locations`."""
     pos = {int(k): i for i, k in enumerate(background_locations)}
     missing = [int(k) for k in locations if int(k) not in pos]
     if missing:

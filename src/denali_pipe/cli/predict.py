@@ -12,12 +12,16 @@ log = logging.getLogger("denali")
 
 def cmd_predict(args: argparse.Namespace) -> None:
     from denali_pipe.evaluate import load_cell
-    from denali_pipe.predict import predict_capture, read_capture
+    from denali_pipe.predict import predict_capture, read_background, read_capture
     from denali_pipe.preprocess import read_crop_window
 
     cells = [(Path(r), load_cell(Path(r))) for r in args.runs]
     capture = read_capture(Path(args.capture), args.location)
-    background = read_capture(Path(args.background), capture.location)
+    background = read_background(Path(args.background), capture.location)
+    if background.n_locations == 1:
+        log.warning(
+            "%s: a background of one location keeps its shot noise, which the training's backgrounds had removed; give the whole NOOBJECT set", args.background
+        )
     record = predict_capture(cells, capture, background, read_crop_window(Path(args.crop)), args.repeat)
     print(json.dumps(record, indent=1))
 
@@ -29,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument(
         "--background",
         required=True,
-        help="the matching NOOBJECT background (same resolution and lighting) at the same gantry location: its NNN.npy, store or stream",
+        help="the matching NOOBJECT set (same resolution and lighting): its <set>_NLOSdata folder, store or stream (a single NNN.npy keeps its shot noise)",
     )
     s.add_argument("--crop", required=True, help="crop_<res>.json from crop-window (results/features/crop_<res>.json of the run)")
     s.add_argument(

@@ -27,12 +27,12 @@ def cmd_crop_window(args: argparse.Namespace) -> None:
 def cmd_preprocess(args: argparse.Namespace) -> None:
     from denali_pipe.io.features import write_features
     from denali_pipe.io.store import open_set
-    from denali_pipe.preprocess import preprocess, read_crop_window
+    from denali_pipe.preprocess import background_means, preprocess, read_crop_window
 
     store, bg = open_set(Path(args.store)), open_set(Path(args.background))
     window = read_crop_window(Path(args.crop))
     try:
-        feats = preprocess(store.histograms[...], store.locations, bg.histograms[...], bg.locations, window)
+        feats = preprocess(store.histograms[...], store.locations, background_means(bg.histograms[...]), bg.locations, window)
     except ValueError as e:
         raise ValueError(f"{args.store} (background {args.background}): {e}") from None
     write_features(Path(args.out), store.capture_set, feats, bg.name)

@@ -26,7 +26,7 @@ from denali_pipe import geometry as geo
 from denali_pipe.io.store import CaptureStore, open_set
 from denali_pipe.meshes import object_mesh
 from denali_pipe.objects import spec_from_dict
-from denali_pipe.preprocess import subtract_background
+from denali_pipe.preprocess import background_means, subtract_background
 from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.seeds import derive_seed, rng_for
 from denali_pipe.twin.calibrate import delay, pulse, read_calibration
@@ -39,11 +39,12 @@ SMOOTH_BINS = 5  # a box mean shows the ~10-bin bump above the shot noise of one
 
 def real_histograms(store: CaptureStore, background: CaptureStore, location: int) -> np.ndarray:
     """(3, 3, N_BINS) float32: every zone at `location`, mean over repeats,
-    minus the background's mean at the same location."""
+    minus the background at the same location (`background_means`, as the
+    features have it)."""
     if store.n_zones != GRID or background.n_zones != GRID:
         raise ValueError(f"{store.path}, {background.path}: Fig 18 needs 3x3 captures")
     h = store.histogram(store.index_of(location))[None]
-    bg = background.histogram(background.index_of(location))[None]
+    bg = background_means(background.histograms[...])[background.index_of(location)][None]
     return subtract_background(h, bg)[0].mean(axis=0)
 
 
