@@ -146,6 +146,12 @@ def test_at_bound_names_the_pinned_coordinates():
     x[0], x[3], x[20], x[27] = C.OFFSET_CM_BOUND, -C.OFFSET_CM_BOUND, np.log(3.0), -20.0
     assert C.at_bound(x, SETTINGS) == ["offset_u[0, 0]", "offset_v[0, 1]", "scale[0, 2]", "time_offset"]
     assert C.at_bound(C.initial(SETTINGS), SETTINGS) == []
+    # where the solver stops when pushed against a bound: just inside it
+    x = C.initial(SETTINGS)
+    x[22], x[24] = np.log(2.9999955), np.log(2.9992)
+    assert C.at_bound(x, SETTINGS) == ["scale[1, 1]", "scale[2, 0]"]
+    x[24] = np.log(2.9)
+    assert C.at_bound(x, SETTINGS) == ["scale[1, 1]"]
 
 
 def test_gains_are_never_negative():
