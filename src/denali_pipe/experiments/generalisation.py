@@ -160,7 +160,8 @@ def _plot_scores(axes, scores: pd.DataFrame, variant_data: str) -> None:
         cnn = s[s["predictor"] == MODEL].set_index("data").loc[list(order)]
         ax.bar(range(len(order)), cnn["value"], yerr=cnn["std"], capsize=4, color=["tab:blue", "tab:orange"], width=0.6, label=MODEL)
         for i, v in enumerate(cnn["value"]):
-            ax.annotate(f"{v:.3g}", (i, v), textcoords="offset points", xytext=(0, -10 if v > 0 else 2), ha="center", fontsize=7)
+            # inside the bar, boxed: at its top the error bar and the dashed baseline cross it
+            ax.text(i, v / 2, f"{v:.3g}", ha="center", va="center", fontsize=7, bbox=dict(fc="white", alpha=0.8, lw=0))
         if task == "location":
             base = s[s["predictor"] == MEAN_BASELINE].set_index("data").loc[list(order)]
             for i, v in enumerate(base["value"]):
