@@ -80,7 +80,7 @@ def read_capture(path: Path, location: int | None = None) -> Capture:
         k = _only_location(path, [int(v) for v in store.locations], location)
         return Capture(_checked(store.histogram(store.index_of(k)), str(path)), k, str(path))
     if path.suffix == ".pkl":
-        records = {int(rec["iter"]): rec["histogram"] for i, rec in iter_records(path) if i > 0}
+        records = _stream_histograms(path)
         k = _only_location(path, list(records), location)
         return Capture(_checked(records[k], f"{path} (location {k})"), k, str(path))
     raise ValueError(f"{path}: not a capture (expected a release NNN.npy, a <set>.zarr store or a .pkl capture stream)")
@@ -103,17 +103,21 @@ def read_background(path: Path, location: int) -> Background:
         store = open_set(path)
         locations, counts = [int(k) for k in store.locations], [_checked(h, str(path)) for h in store.histograms[...]]
     elif path.suffix == ".pkl":
-        records = {int(rec["iter"]): rec["histogram"] for i, rec in iter_records(path) if i > 0}
+        records = _stream_histograms(path)
         locations, counts = list(records), [_checked(h, f"{path} (location {k})") for k, h in records.items()]
     else:
         one = read_capture(path, location)
         locations, counts = [one.location], [one.counts]
-    if location not in locations:
-        raise ValueError(f"{path} has no capture at gantry location {location} (it has {sorted(locations)[:10]}{' ...' if len(locations) > 10 else ''})")
+    _only_location(path, locations, location)
     if len({c.shape for c in counts}) != 1:
         raise ValueError(f"{path}: its captures differ in shape ({sorted({c.shape for c in counts})})")
     means = background_means(np.stack(counts))
     return Background(means[locations.index(location)], location, str(path), len(locations))
+
+
+def _stream_histograms(path: Path) -> dict:
+    """{gantry location: histograms} of a pickle stream's location records."""
+    return {int(rec["iter"]): rec["histogram"] for i, rec in iter_records(path) if i > 0}
 
 
 def _only_location(path: Path, locations: list[int], wanted: int | None) -> int:
