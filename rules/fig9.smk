@@ -18,6 +18,7 @@ rule fig9:
         "logs/fig9.log",
     benchmark:
         "benchmarks/fig9.tsv"
+    priority: SERIAL_CHAIN_PRIORITY
     # models this small train best single-threaded beside other jobs (see train.threads)
     threads: config["train"]["threads"]
     params:

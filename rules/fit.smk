@@ -11,6 +11,7 @@ rule transforms:
         "logs/fit/transforms.log",
     benchmark:
         "benchmarks/fit/transforms.tsv"
+    priority: SERIAL_CHAIN_PRIORITY
     params:
         config=FIT_JOB_CONFIG,
     shell:

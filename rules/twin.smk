@@ -66,6 +66,7 @@ rule twin_calibration:
         "logs/twin_calibration.log",
     benchmark:
         "benchmarks/twin_calibration.tsv"
+    priority: SERIAL_CHAIN_PRIORITY
     params:
         objects=lambda w: json.dumps(sorted((CATALOGUE[s.object].to_dict() for s in {s.object: s for s in fit_sets()}.values()), key=lambda d: d["name"])),
         config=TWIN_CALIBRATION_CONFIG,
@@ -85,6 +86,7 @@ rule twin_calibrated:
         "logs/twin_calibrated/{object}_{size}.log",
     benchmark:
         "benchmarks/twin_calibrated/{object}_{size}.tsv"
+    priority: SERIAL_CHAIN_PRIORITY
     params:
         object=rig_object_arg,
         config=TWIN_JOB_CONFIG,
@@ -104,6 +106,7 @@ rule render_benchmark:
         "logs/render_benchmark.log",
     benchmark:
         "benchmarks/render_benchmark.tsv"
+    priority: SERIAL_CHAIN_PRIORITY
     params:
         objects=json.dumps(sorted((CATALOGUE[name].to_dict() for name in dict.fromkeys(n for n, _ in TWIN_PAIRS)), key=lambda d: d["name"]), sort_keys=True),
         config=json.dumps(
