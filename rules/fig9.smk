@@ -24,6 +24,8 @@ rule fig9:
     params:
         config=FIG9_JOB_CONFIG,
         hyper=fig9_hyper,
+        precision=config["train"]["precision"],
     shell:
         "{DENALI} fig9 --features {input.features} --twins {input.twins} --positions {input.positions} --transforms {input.transforms}"
-        " --config {params.config:q} --hyper {params.hyper:q} --threads {threads} --out {output.png} > {log} 2>&1"
+        " --config {params.config:q} --hyper {params.hyper:q} --threads {threads} --precision {params.precision}"
+        " --out {output.png} > {log} 2>&1"

@@ -27,6 +27,7 @@ rule train:
         outdir=lambda w, output: Path(output.metrics).parent,
         validation=config["train"]["validation_fraction"],
         budget=budget_arg,
+        precision=config["train"]["precision"],
     shell:
         "{DENALI} train {input.x} --table {input.table} --cell {params.cell} --hyper {params.hyper} {params.factory}"
-        " --validation-fraction {params.validation} {params.budget} --threads {threads} --outdir {params.outdir} > {log} 2>&1"
+        " --validation-fraction {params.validation} {params.budget} --threads {threads} --precision {params.precision} --outdir {params.outdir} > {log} 2>&1"

@@ -12,7 +12,7 @@ from denali_pipe.cells import Cell
 from denali_pipe.classical import run_linear
 from denali_pipe.models import PAPER_MODELS, cnn1d
 from denali_pipe.preprocess import normalise
-from denali_pipe.train import Hyper, fit, loss_for, partition, run_cell, targets, training_device
+from denali_pipe.train import Hyper, fit, loss_for, partition, run_cell, targets, training_device, training_precision
 
 CLASSES = ("A", "B", "circle")
 N_LOC, REPEATS, BINS = 8, 3, 24
@@ -121,6 +121,29 @@ def test_training_device_is_the_gpu_whenever_torch_sees_one():
     # `denali train` passes torch.cuda.is_available(): a flag, so both branches run without a GPU
     assert training_device(cuda_available=True) == "cuda"
     assert training_device(cuda_available=False) == "cpu"
+
+
+def test_training_precision_is_bfloat16_only_where_auto_finds_amx_or_it_is_asked_for():
+    # `denali train` passes torch's AMX probe: a flag, so every branch runs on any CPU
+    assert training_precision("auto", "cpu", cpu_has_amx=True) == torch.bfloat16
+    assert training_precision("auto", "cpu", cpu_has_amx=False) == torch.float32
+    assert training_precision("auto", "cuda", cpu_has_amx=True) == torch.float32
+    assert training_precision("bfloat16", "cpu", cpu_has_amx=False) == torch.bfloat16
+    assert training_precision("float32", "cpu", cpu_has_amx=True) == torch.float32
+    with pytest.raises(ValueError, match="unknown precision 'half'"):
+        training_precision("half", "cpu", cpu_has_amx=True)
+
+
+def test_a_bfloat16_cell_learns_keeps_float32_weights_and_records_its_precision(data):
+    # bfloat16 autocast runs on any CPU (emulated without AMX): the same cell as in float32 must still learn
+    x, samples = data
+    res = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory(), precision=torch.bfloat16)
+    m = res.metrics
+    assert m.precision == "bfloat16" and m.test["top1"] > 0.8 > m.baseline["top1"]
+    assert all(v.dtype == torch.float32 for v in res.state["model"].values() if v.is_floating_point())
+    f32 = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory())
+    assert f32.metrics.precision == "float32"
+    assert not all(torch.equal(res.state["model"][k], f32.state["model"][k]) for k in f32.state["model"])
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")

@@ -53,6 +53,7 @@ class CellMetrics:
     threads: int | None = None
     selected_regularisation: float | None = None
     flops: int | None = None  # one sample's forward pass (models.forward_flops); None for the linear model
+    precision: str = "float32"  # the dtype training computed in (train.training_precision)
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=1) + "\n"

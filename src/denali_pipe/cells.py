@@ -10,6 +10,8 @@ LINEAR = "linear"  # the classical reference model (classical.py)
 TASKS = ("location", "shape", "size")
 SPLITS = ("random", "repeats_grouped", "location_held_out", "shape_held_out", "size_held_out")
 PROTOCOLS = ("clean", "paper")
+# The dtypes a network can train in (config train.precision; train.training_precision).
+PRECISIONS = ("auto", "float32", "bfloat16")
 # The condition of a cell that trains and tests on every sample (conditions.py has the others).
 ALL = "all"
 

@@ -6,6 +6,7 @@ import argparse
 import logging
 from pathlib import Path
 
+from denali_pipe.cells import PRECISIONS
 from denali_pipe.cli.common import json_arg
 from denali_pipe.cli.fit import pairs_and_split
 
@@ -20,7 +21,7 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     from denali_pipe.dataset import location_labels
     from denali_pipe.experiments.fig9 import run_fig9
     from denali_pipe.report.fig9 import write_fig9
-    from denali_pipe.train import Hyper
+    from denali_pipe.train import Hyper, cpu_has_amx, training_precision
     from denali_pipe.transforms import read_fit_check, read_transforms
 
     torch.set_num_threads(args.threads)
@@ -36,7 +37,15 @@ def cmd_fig9(args: argparse.Namespace) -> None:
             log.warning(
                 "%s: zone %d's simulated fidelities use transforms the real captures do not identify (%s)", args.transforms, z, ", ".join(check.unidentified)
             )
-    runs = run_fig9(pairs, xy, read_transforms(Path(args.transforms)), args.config["fit"], Hyper(**args.hyper), args.config["seed"])
+    runs = run_fig9(
+        pairs,
+        xy,
+        read_transforms(Path(args.transforms)),
+        args.config["fit"],
+        Hyper(**args.hyper),
+        args.config["seed"],
+        training_precision(args.precision, "cpu", cpu_has_amx()),
+    )
     out = Path(args.out)
     table = write_fig9(runs, out, out.with_suffix(".csv"))
     log.info("wrote %s and its CSV:\n%s", out, table.to_string(index=False))
@@ -51,5 +60,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--config", type=json_arg, required=True, help='JSON {"seed": ..., "fit": {...}}')
     s.add_argument("--hyper", type=json_arg, required=True, help='JSON {"lr", "epochs", "batch_size", "norm"} of the localiser')
     s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    s.add_argument(
+        "--precision", choices=PRECISIONS, default="float32", help="the localisers' training dtype (config train.precision; auto: bfloat16 on a CPU with AMX)"
+    )
     s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
     s.set_defaults(func=cmd_fig9)

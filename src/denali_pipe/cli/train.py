@@ -6,6 +6,7 @@ import argparse
 import logging
 from pathlib import Path
 
+from denali_pipe.cells import PRECISIONS
 from denali_pipe.cli.common import json_arg
 
 log = logging.getLogger("denali")
@@ -20,7 +21,7 @@ def cmd_train(args: argparse.Namespace) -> None:
     from denali_pipe.conditions import condition_view
     from denali_pipe.dataset import read_dataset
     from denali_pipe.saved_cell import MODEL_FILE
-    from denali_pipe.train import Hyper, run_cell, training_device
+    from denali_pipe.train import Hyper, cpu_has_amx, run_cell, training_device, training_precision
 
     torch.set_num_threads(args.threads)
     cell = Cell(**args.cell)
@@ -38,7 +39,8 @@ def cmd_train(args: argparse.Namespace) -> None:
         raise ValueError(f"train: model {cell.model!r} is a network and needs --factory 'package.module:factory'")
     else:
         device = training_device(torch.cuda.is_available())
-        result = run_cell(x, samples, cell, Hyper(**args.hyper), args.validation_fraction, args.factory, device, args.budget_seconds)
+        precision = training_precision(args.precision, device, cpu_has_amx())
+        result = run_cell(x, samples, cell, Hyper(**args.hyper), args.validation_fraction, args.factory, device, args.budget_seconds, precision)
     with atomic_dir(Path(args.outdir)) as tmp:
         (tmp / METRICS_FILE).write_text(result.metrics.to_json())
         result.curves.to_csv(tmp / "curves.csv", index=False)
@@ -58,6 +60,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     s.add_argument("--validation-fraction", type=float, required=True, help="validation share of the training split (clean protocol)")
     s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    s.add_argument(
+        "--precision", choices=PRECISIONS, default="float32", help="the networks' training dtype (config train.precision; auto: bfloat16 on a CPU with AMX)"
+    )
     s.add_argument("--budget-seconds", type=float, default=None, help="stop a network's training after this much training time")
     s.add_argument("--outdir", required=True, help="output run folder: metrics.json, curves.csv, model.pt")
     s.set_defaults(func=cmd_train)

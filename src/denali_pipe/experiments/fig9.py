@@ -97,17 +97,17 @@ def real_samples(real: np.ndarray, y: np.ndarray, n: int, seed: int) -> tuple[np
     return real[rows, reps], y[rows], np.stack([rows, reps], axis=1)
 
 
-def train_localiser(x: np.ndarray, y: np.ndarray, hp: Hyper, seed: int) -> tuple[nn.Module, tuple | None]:
+def train_localiser(x: np.ndarray, y: np.ndarray, hp: Hyper, seed: int, precision: torch.dtype) -> tuple[nn.Module, tuple | None]:
     """A fresh 1D CNN (location) trained on x (N, n, n, T), y (N, 2) for
     hp.epochs through `train.fit` (the cells' loop and loss, no model
-    selection). Returns the model and its normalisation statistics
+    selection) in `precision` (`train.training_precision`). Returns the model and its normalisation statistics
     (`preprocess.normalise`, from x)."""
     torch.manual_seed(seed)
     xn, stats = normalise(x, hp.norm)
     xt = torch.from_numpy(np.ascontiguousarray(xn))
     yt = torch.from_numpy(np.ascontiguousarray(y, np.float32))
     model = cnn1d("location", N_LOCATION_OUTPUTS, tuple(x.shape[1:]))
-    fit(model, xt, yt, hp, seed, loss_for("location"), name="fig9 localiser")
+    fit(model, xt, yt, hp, seed, loss_for("location"), name="fig9 localiser", precision=precision)
     return model, stats
 
 
@@ -133,10 +133,10 @@ def workspace(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return y.min(axis=0), y.max(axis=0)
 
 
-def score(x_fit: np.ndarray, y_fit: np.ndarray, x_test: np.ndarray, y_test: np.ndarray, hp: Hyper, seed: int) -> dict:
+def score(x_fit: np.ndarray, y_fit: np.ndarray, x_test: np.ndarray, y_test: np.ndarray, hp: Hyper, seed: int, precision: torch.dtype) -> dict:
     """Train a localiser on x_fit, y_fit and its test metrics (predictions bounded to y_fit's box)."""
     t0 = time.perf_counter()
-    model, stats = train_localiser(x_fit, y_fit, hp, seed)
+    model, stats = train_localiser(x_fit, y_fit, hp, seed, precision)
     m = regression_metrics(bound_to_workspace(predict(model, stats, x_test, hp.norm), *workspace(y_fit)), y_test)
     log.info("fig9 localiser on %d samples: test RMSE %.4f m (%.1f s)", len(x_fit), m["rmse"], time.perf_counter() - t0)
     return m
@@ -153,7 +153,9 @@ def control_hyper(hp: Hyper, n_sim: int, n_real: int) -> Hyper:
     return replace(hp, epochs=-(-steps // -(-n_real // hp.batch_size)))
 
 
-def run_fig9(pairs: Pairs, labels: np.ndarray, zt: ZoneTransforms, settings: dict, hp: Hyper, split_seed: int) -> pd.DataFrame:
+def run_fig9(
+    pairs: Pairs, labels: np.ndarray, zt: ZoneTransforms, settings: dict, hp: Hyper, split_seed: int, precision: torch.dtype = torch.float32
+) -> pd.DataFrame:
     """Every (panel, fidelity or control, n real, seed) model of Fig 9 and its test metrics.
 
     pairs: every zone of every real capture with its twin (`transforms.build_pairs`);
@@ -161,7 +163,8 @@ def run_fig9(pairs: Pairs, labels: np.ndarray, zt: ZoneTransforms, settings: dic
     metres; zt: the fitted transforms; settings: the `fit` config section
     (test_fraction, fig9: real_samples, seeds, sim_copies); hp:
     Adam/batch/normalisation settings and epochs; split_seed: the seed of
-    the real train/test split (the calibration's and the transforms').
+    the real train/test split (the calibration's and the transforms');
+    precision: the models' training dtype (`train.training_precision`).
 
     Returns one row per model, predictions bounded to its training labels'
     box, and one `MEAN_BASELINE` row per panel and seed: panel, fidelity,
@@ -188,13 +191,13 @@ def run_fig9(pairs: Pairs, labels: np.ndarray, zt: ZoneTransforms, settings: dic
             for n_real in f9["real_samples"]:
                 if n_real > 0:
                     x_real, y_real, _ = real_samples(r_train, y_train, n_real, seed)
-                    m = score(x_real, y_real, x_test, y_test, control_hyper(hp, n_sim, n_real), model_seed)
+                    m = score(x_real, y_real, x_test, y_test, control_hyper(hp, n_sim, n_real), model_seed, precision)
                     rows.append({**common, "fidelity": CONTROL, "n_real": n_real, "n_sim": 0, **m})
             for fidelity in FIDELITIES:
                 x_sim, y_sim = sim_samples(s_train, zones, y_train, zt, fidelity, f9["sim_copies"], seed, crop)
                 for n_real in f9["real_samples"]:
                     x_real, y_real, _ = real_samples(r_train, y_train, n_real, seed)
-                    m = score(np.concatenate([x_sim, x_real]), np.concatenate([y_sim, y_real]), x_test, y_test, hp, model_seed)
+                    m = score(np.concatenate([x_sim, x_real]), np.concatenate([y_sim, y_real]), x_test, y_test, hp, model_seed, precision)
                     rows.append({**common, "fidelity": fidelity, "n_real": n_real, "n_sim": len(x_sim), **m})
             rows.append({**common, "fidelity": MEAN_BASELINE, "n_real": 0, "n_sim": 0, **baseline})
     return pd.DataFrame(rows)

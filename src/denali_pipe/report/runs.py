@@ -49,6 +49,7 @@ def load_runs(paths: list[Path]) -> pd.DataFrame:
                 "inference_seconds": m.inference_seconds,
                 "train_samples_per_second": m.train_samples_per_second,
                 "device": m.device,
+                "precision": m.precision,
                 **{f"test_{k}": v for k, v in m.test.items()},
                 **{f"baseline_{k}": v for k, v in m.baseline.items()},
             }

@@ -1,8 +1,9 @@
 """Table 10: per model (in the order given) and task, parameters, forward
 FLOPs per sample, data sizes, training and inference cost, beside the
 paper's (which prints no FLOPs). Hours are measured wall-clock of our cells (mean
-over seeds), on the device each cell ran on; `epochs` is the configured
-count and `epochs_run` what the time budget allowed (mean over seeds). A
+over seeds), on the device and in the precision (`device`, `precision`) each
+cell trained in; `epochs` is the configured count and `epochs_run` what the
+time budget allowed (mean over seeds). A
 model the preset leaves out (config `train.left_out`) keeps its rows, ours
 n/a beside the paper's, with the reason in `note`."""
 
@@ -53,6 +54,7 @@ def write_table10(metrics_paths: list[Path], out: Path, left_out: dict[str, str]
             row["train_samples_per_second"] = s["train_samples_per_second"]
             row["validation_size"] = int(r["n_validation"])
             row["device"] = r["device"]
+            row["precision"] = r["precision"]
             row["n_seeds"] = int(s["n_seeds"])
             row["note"] = ""
             rows.append(row)
