@@ -2,13 +2,16 @@
 """Benchmark training throughput of the four models; prints a table, asserts nothing.
 
     python scripts/bench_models.py               # 2 CPU threads, 3x3 zones
+    python scripts/bench_models.py --threads 1 --precision bfloat16   # as a cell under train.precision auto on AMX
     OMP_WAIT_POLICY=PASSIVE python scripts/bench_models.py   # on a busy machine
 
 Samples per second of a full training step (forward, loss, backward, Adam step)
 in train mode, with the plain loop a trainer would use without a DataLoader:
 index a random batch out of an in-memory tensor. Inputs are random normal
 (log+z-scored histograms look like that); the loss is the reference's:
-MSELoss(reduction="sum") for location, cross-entropy for shape. Rows are the
+MSELoss(reduction="sum") for location, cross-entropy for shape; forward
+passes in `--precision` as `train.fit` runs them (bfloat16: torch.autocast,
+the loss in float32). Rows are the
 location models plus the shallow shape 3D CNN, which is a different network
 (the Transformer classifier costs the same as the regressor).
 
@@ -51,7 +54,7 @@ def build(name: str, task: str, bins: int) -> nn.Module:
     return PAPER_MODELS[name](task, n_outputs(task, N_CLASSES), (N, N, bins))
 
 
-def step_fn(model: nn.Module, task: str, x: torch.Tensor, y: torch.Tensor, batch: int):
+def step_fn(model: nn.Module, task: str, x: torch.Tensor, y: torch.Tensor, batch: int, precision: torch.dtype):
     """One training step on a random batch of (x, y), as a closure."""
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
     loss_fn = nn.MSELoss(reduction="sum") if task == "location" else nn.CrossEntropyLoss()
@@ -59,13 +62,15 @@ def step_fn(model: nn.Module, task: str, x: torch.Tensor, y: torch.Tensor, batch
     def step() -> None:
         idx = torch.randint(len(x), (batch,))
         opt.zero_grad(set_to_none=True)
-        loss_fn(model(x[idx]), y[idx]).backward()
+        with torch.autocast("cpu", dtype=precision, enabled=precision != torch.float32):
+            out = model(x[idx])
+        loss_fn(out.float(), y[idx]).backward()
         opt.step()
 
     return step
 
 
-def throughput(name: str, task: str, bins: int, batch: int, est_step_s: float | None) -> tuple[float, str]:
+def throughput(name: str, task: str, bins: int, batch: int, est_step_s: float | None, precision: torch.dtype) -> tuple[float, str]:
     """(samples/s, note) for one cell; `est_step_s` is the step time expected from a smaller batch."""
     if est_step_s is not None and est_step_s > MAX_STEP_S:
         return batch / est_step_s, "skipped"
@@ -74,7 +79,7 @@ def throughput(name: str, task: str, bins: int, batch: int, est_step_s: float | 
     n_samples = 4 * batch
     x = torch.randn(n_samples, N, N, bins)
     y = torch.rand(n_samples, 2) if task == "location" else torch.randint(n_outputs(task, N_CLASSES), (n_samples,))
-    step = step_fn(model, task, x, y, batch)
+    step = step_fn(model, task, x, y, batch, precision)
     t0 = time.perf_counter()
     step()  # warm-up: allocations, oneDNN primitives for these shapes
     first = time.perf_counter() - t0
@@ -90,10 +95,12 @@ def throughput(name: str, task: str, bins: int, batch: int, est_step_s: float | 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--threads", type=int, default=2, help="torch intra-op threads")
+    parser.add_argument("--precision", choices=("float32", "bfloat16"), default="float32", help="the training passes' dtype (train.precision)")
     args = parser.parse_args()
+    precision = getattr(torch, args.precision)
     torch.set_num_threads(args.threads)
     policy = os.environ.get("OMP_WAIT_POLICY", "default")
-    print(f"training samples/s, {N}x{N} zones, {args.threads} CPU threads, OMP_WAIT_POLICY {policy}, torch {torch.__version__}")
+    print(f"training samples/s, {N}x{N} zones, {args.threads} CPU threads, {args.precision}, OMP_WAIT_POLICY {policy}, torch {torch.__version__}")
     columns = "".join(f"{f'bins {bins} batch {batch}':>24}" for bins in BINS for batch in BATCHES)
     print(f"{'model':<12}{'task':<10}{'params':>11}{columns}")
     t_start = time.perf_counter()
@@ -102,7 +109,7 @@ def main() -> None:
         for bins in BINS:
             est = None
             for batch in BATCHES:
-                rate, note = throughput(name, task, bins, batch, est)
+                rate, note = throughput(name, task, bins, batch, est, precision)
                 est = BATCHES[-1] / rate  # step time at the larger batch, if time grows linearly with it
                 cells.append(f"[{rate:.1f}] {note}" if note == "skipped" else f"{rate:.1f} ({note})")
         params = n_params(build(name, task, BINS[0]))
