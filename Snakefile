@@ -4,7 +4,12 @@
 # results/report.html` collects every table and figure with its caption.
 
 
+from denali_pipe.scheduler_timer import keep_one_reevaluation_timer
 from denali_pipe.targets import target_files
+
+# Snakemake's scheduler starts a timer chain per finished job and its main
+# process ends up scheduling on a quarter of a 2-core machine (the module says why).
+keep_one_reevaluation_timer()
 
 
 report: "report/workflow.rst"
