@@ -45,9 +45,9 @@ LEFT_OUT_ARG = f"--left-out {shlex.quote(json.dumps(LEFT_OUT))}"
 # workflow, so jobs find the project whether or not its venv is activated,
 # locally or on cluster nodes that share the venv's path.
 DENALI = f"{shlex.quote(sys.executable)} -m denali_pipe.cli"
-# The longest serial jobs (the render benchmark, one ~20-min job) and the
+# The longest serial jobs (the render benchmark, one ~10-min job) and the
 # chain ending in Fig 9 (the twin calibration, 67 calibrated twins, the
-# transforms, then Fig 9's ~18-min single-thread job) start as soon as their
+# transforms, then Fig 9's ~9-min single-thread job) start as soon as their
 # inputs exist: left behind the ~170 training cells they would run last,
 # alone on one core (Snakemake runs higher-priority ready jobs first).
 SERIAL_CHAIN_PRIORITY = 10

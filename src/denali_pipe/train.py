@@ -115,7 +115,7 @@ def training_precision(setting: str, device: str, cpu_has_amx: bool) -> torch.dt
 
     setting: config `train.precision`. `auto` is bfloat16 on a CPU with AMX
     tiles, whose matrix units multiply bfloat16 natively (the 1D CNN trains
-    1.9-2.7x faster there, the 3D CNN 3.7x; docs/performance.md), and
+    2.0-2.7x faster there, the 3D CNN 4x; docs/performance.md), and
     float32 elsewhere: without AMX, bfloat16 is emulated and gains little,
     and on CUDA it has not been measured."""
     if setting not in PRECISIONS:
@@ -126,7 +126,8 @@ def training_precision(setting: str, device: str, cpu_has_amx: bool) -> torch.dt
 
 
 def cpu_has_amx() -> bool:
-    """Whether this CPU has AMX tiles (Intel Sapphire Rapids and later)."""
+    """Whether this CPU has AMX tiles (Intel Sapphire Rapids and later): a
+    private torch function, so torch's pin (pyproject.toml) keeps it."""
     return torch.cpu._is_amx_tile_supported()
 
 

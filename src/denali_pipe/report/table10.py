@@ -3,9 +3,9 @@ FLOPs per sample, data sizes, training and inference cost, beside the
 paper's (which prints no FLOPs). Hours are measured wall-clock of our cells (mean
 over seeds), on the device and in the precision (`device`, `precision`) each
 cell trained in; `epochs` is the configured count and `epochs_run` what the
-time budget allowed (mean over seeds). A
-model the preset leaves out (config `train.left_out`) keeps its rows, ours
-n/a beside the paper's, with the reason in `note`."""
+time budget allowed (mean over seeds). A model the preset leaves out (config
+`train.left_out`) keeps its rows, ours n/a beside the paper's, with the
+reason in `note`."""
 
 from __future__ import annotations
 
