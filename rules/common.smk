@@ -13,7 +13,7 @@ import pandas as pd
 
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
 from denali_pipe.cells import LINEAR, SPLITS, TASKS, is_ill_posed
-from denali_pipe.costs import combine, cost_model, frame_pixels, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
+from denali_pipe.costs import combine, cost_model, frame_pixels, gpu_speedup, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
 from denali_pipe.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.experiments.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
 from denali_pipe.geometry import N_BINS, N_LOCATIONS, RESOLUTIONS, select_locations
@@ -389,16 +389,19 @@ def job_work(rule_name, wildcards):
     return work
 
 
-def job_speedup(rule_name):
-    return CLUSTER["gpu_speedup"] if rule_name == "train" and TRAIN["gpus"] > 0 else 1.0
+def request_gpus(wildcards):
+    """A training cell's GPUs: train.gpus for a network; none for the linear
+    model, which fits in closed form on the CPU."""
+    return 0 if wildcards.model == LINEAR else TRAIN["gpus"]
 
 
 def request_runtime(rule_name):
-    """`runtime` (minutes) of a rule's jobs: predicted CPU seconds x headroom."""
+    """`runtime` (minutes) of a rule's jobs: predicted CPU seconds x headroom,
+    over a training cell's measured GPU speed-up when it asks for GPUs."""
     return lambda wildcards: runtime_minutes(
         predict(cost_model(COSTS, rule_name, wildcards.get("model"), wildcards.get("task"))["cpu_s"], job_work(rule_name, wildcards)),
         CLUSTER,
-        job_speedup(rule_name),
+        gpu_speedup(CLUSTER["gpu_speedup"], rule_name, wildcards.get("model"), wildcards.get("task"), request_gpus(wildcards) if rule_name == "train" else 0),
     )
 
 

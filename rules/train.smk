@@ -17,7 +17,7 @@ rule train:
         f"benchmarks/{RUN_DIR}.tsv"
     threads: config["train"]["threads"]
     resources:
-        gpu=config["train"]["gpus"],
+        gpu=request_gpus,
         runtime=request_runtime("train"),
         mem_mb=request_mem_mb("train"),
     params:

@@ -3,6 +3,7 @@
 
     python scripts/bench_models.py               # 2 CPU threads, 3x3 zones
     python scripts/bench_models.py --threads 1 --precision bfloat16   # as a cell under train.precision auto on AMX
+    python scripts/bench_models.py --device cuda --precision bfloat16  # on the first GPU
     OMP_WAIT_POLICY=PASSIVE python scripts/bench_models.py   # on a busy machine
 
 Samples per second of a full training step (forward, loss, backward, Adam step)
@@ -55,33 +56,36 @@ def build(name: str, task: str, bins: int) -> nn.Module:
 
 
 def step_fn(model: nn.Module, task: str, x: torch.Tensor, y: torch.Tensor, batch: int, precision: torch.dtype):
-    """One training step on a random batch of (x, y), as a closure."""
+    """One training step on a random batch of (x, y), as a closure; on CUDA
+    it waits for the GPU to finish, so that wall-clock times are the step's."""
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
     loss_fn = nn.MSELoss(reduction="sum") if task == "location" else nn.CrossEntropyLoss()
 
     def step() -> None:
-        idx = torch.randint(len(x), (batch,))
+        idx = torch.randint(len(x), (batch,), device=x.device)
         opt.zero_grad(set_to_none=True)
-        with torch.autocast("cpu", dtype=precision, enabled=precision != torch.float32):
+        with torch.autocast(x.device.type, dtype=precision, enabled=precision != torch.float32):
             out = model(x[idx])
         loss_fn(out.float(), y[idx]).backward()
         opt.step()
+        if x.device.type == "cuda":
+            torch.cuda.synchronize()
 
     return step
 
 
-def throughput(name: str, task: str, bins: int, batch: int, est_step_s: float | None, precision: torch.dtype) -> tuple[float, str]:
+def throughput(name: str, task: str, bins: int, batch: int, est_step_s: float | None, precision: torch.dtype, device: str) -> tuple[float, str]:
     """(samples/s, note) for one cell; `est_step_s` is the step time expected from a smaller batch."""
     if est_step_s is not None and est_step_s > MAX_STEP_S:
         return batch / est_step_s, "skipped"
     torch.manual_seed(0)
-    model = build(name, task, bins).train()
+    model = build(name, task, bins).train().to(device)
     n_samples = 4 * batch
-    x = torch.randn(n_samples, N, N, bins)
-    y = torch.rand(n_samples, 2) if task == "location" else torch.randint(n_outputs(task, N_CLASSES), (n_samples,))
+    x = torch.randn(n_samples, N, N, bins, device=device)
+    y = torch.rand(n_samples, 2, device=device) if task == "location" else torch.randint(n_outputs(task, N_CLASSES), (n_samples,), device=device)
     step = step_fn(model, task, x, y, batch, precision)
     t0 = time.perf_counter()
-    step()  # warm-up: allocations, oneDNN primitives for these shapes
+    step()  # warm-up: allocations, oneDNN primitives or cuDNN kernels for these shapes
     first = time.perf_counter() - t0
     if first > SLOW_STEP_S:
         return batch / first, "1 cold step"
@@ -95,12 +99,14 @@ def throughput(name: str, task: str, bins: int, batch: int, est_step_s: float | 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--threads", type=int, default=2, help="torch intra-op threads")
+    parser.add_argument("--device", default="cpu", help="torch device: cpu, or cuda for the first GPU")
     parser.add_argument("--precision", choices=("float32", "bfloat16"), default="float32", help="the training passes' dtype (train.precision)")
     args = parser.parse_args()
     precision = getattr(torch, args.precision)
     torch.set_num_threads(args.threads)
     policy = os.environ.get("OMP_WAIT_POLICY", "default")
-    print(f"training samples/s, {N}x{N} zones, {args.threads} CPU threads, {args.precision}, OMP_WAIT_POLICY {policy}, torch {torch.__version__}")
+    where = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else f"{args.threads} CPU threads"
+    print(f"training samples/s, {N}x{N} zones, {where}, {args.precision}, OMP_WAIT_POLICY {policy}, torch {torch.__version__}")
     columns = "".join(f"{f'bins {bins} batch {batch}':>24}" for bins in BINS for batch in BATCHES)
     print(f"{'model':<12}{'task':<10}{'params':>11}{columns}")
     t_start = time.perf_counter()
@@ -109,7 +115,7 @@ def main() -> None:
         for bins in BINS:
             est = None
             for batch in BATCHES:
-                rate, note = throughput(name, task, bins, batch, est, precision)
+                rate, note = throughput(name, task, bins, batch, est, precision, args.device)
                 est = BATCHES[-1] / rate  # step time at the larger batch, if time grows linearly with it
                 cells.append(f"[{rate:.1f}] {note}" if note == "skipped" else f"{rate:.1f} ({note})")
         params = n_params(build(name, task, BINS[0]))

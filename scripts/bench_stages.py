@@ -4,6 +4,7 @@
     python scripts/bench_stages.py run -- SNAKEMAKE_ARGS...
     python scripts/bench_stages.py fit RUN [RUN ...] [--coarse RUN ...] [--check RUN]
                                    [--write-costs config/costs.yaml] [--nodes 4 --node-cores 16 ...]
+    python scripts/bench_stages.py project RUN [--nodes 4 ...]
 
 `run` is Snakemake with every benchmarked job sampled every 0.5 s (see
 `run_snakemake`); make measured runs with it. `fit` reads the Snakemake
@@ -21,9 +22,14 @@ benchmarks/, results/, data/raw/) and, per stage (rule):
 - projects the paper preset (`config/presets/paper.yaml`, every table and
   figure): per-job costs on its dry-run DAG, the DAG's critical path and list
   schedules on 2 and 16 cores and on a SLURM cluster (training cells on GPUs
-  at an assumed speed-up, each submission paying a measured overhead);
+  at their measured speed-up, config `cluster.gpu_speedup`, each submission
+  paying a measured overhead);
 - with `--write-costs`: writes the fitted models as the cost table the
   rules' SLURM requests come from.
+
+`project` makes the projection alone, from the committed cost table
+(`cluster.costs`) instead of a fit; RUN (any finished run, `--coarse` style)
+gives only each split's share of its dataset and the cells' input sizes.
 
 CPU time, not wall time, is the measure throughout: the machines measured on
 were shared, and contention stretches wall time far more than CPU time.
@@ -49,6 +55,7 @@ from scipy.optimize import nnls
 
 from denali_pipe import costs
 from denali_pipe.capture_sets import FOLDER_SUFFIX, parse_set_name
+from denali_pipe.cells import LINEAR
 
 REPO = Path(__file__).resolve().parents[1]
 WORKFLOW_FILES = ("Snakefile", "rules", "config", "profiles", "envs", "report", "examples")
@@ -128,14 +135,14 @@ def train_row(run: Path, bench: Path) -> dict:
     cell_dir = run / bench.relative_to(run / "benchmarks").with_suffix("")
     m = json.loads((cell_dir / "metrics.json").read_text())
     n_data = m["n_train"] + m["n_validation"] + m["n_test"]
-    work = costs.training_work(m["samples_seen"])
+    work = costs.training_work(m["samples_seen"] or 0)  # the linear model fits in closed form: no samples seen
     work["hist"] = float(n_data * np.prod(m["input_shape"]))
     dataset = run / f"results/datasets/{m['cell']['resolution']}.parquet"
     return {
         "work": work,
         "model": m["cell"]["model"],
         "task": m["cell"]["task"],
-        "units": m["samples_seen"],
+        "units": m["samples_seen"] or 0,
         "key": (m["cell"]["split"], m["cell"]["condition"], m["cell"]["task"]),
         "train_fraction": m["n_train"] / pq.read_metadata(dataset).num_rows,
         "input_values": int(np.prod(m["input_shape"])),
@@ -471,13 +478,18 @@ def print_projection(fitted: dict, jobs: pd.DataFrame, args: argparse.Namespace)
     print(f"  in all {all_cpu / 3600:.1f} CPU-h; critical path {crit / 3600:.1f} h")
     for cores in (2, 16):
         print(f"  {cores} cores: {list_schedule(dur, parents, cores) / 3600:.1f} h (list schedule; total / cores = {all_cpu / cores / 3600:.1f} h)")
-    train = {n for n, j in pjobs.items() if j["rule"] == "train"}
+    train = {n for n, j in pjobs.items() if j["rule"] == "train" and j["model"] != LINEAR}  # the linear model fits on the CPU
     over = args.submit_overhead_s
-    gpu_dur = {n: (d / args.gpu_speedup if n in train else d) + over for n, d in dur.items()}
+    speedup = {n: costs.gpu_speedup(cfg["cluster"]["gpu_speedup"], j["rule"], j["model"], j["task"], gpus=int(n in train)) for n, j in pjobs.items()}
+    gpu_dur = {n: d / speedup[n] + over for n, d in dur.items()}
+    on_gpu = defaultdict(float)
+    for n in train:
+        on_gpu[pjobs[n]["model"]] += gpu_dur[n]
+    print("  training on GPUs at the measured speed-ups (cluster.gpu_speedup): " + ", ".join(f"{m} {s / 3600:.1f} GPU-h" for m, s in on_gpu.items()))
     cores, gpus = args.nodes * args.node_cores, args.nodes * args.node_gpus
     print(
-        f"  SLURM, {args.nodes} nodes x {args.node_cores} cores, {gpus} GPUs (training cells on GPUs at an ASSUMED {args.gpu_speedup:g}x "
-        f"a core, each job +{over:g} s submission overhead): {list_schedule(gpu_dur, parents, cores, train, gpus) / 3600:.1f} h; "
+        f"  SLURM, {args.nodes} nodes x {args.node_cores} cores, {gpus} GPUs (training cells on GPUs, "
+        f"each job +{over:g} s submission overhead): {list_schedule(gpu_dur, parents, cores, train, gpus) / 3600:.1f} h; "
         f"critical path {max(bottom_levels(gpu_dur, parents).values()) / 3600:.1f} h"
     )
     cpu_only = {n: d + over for n, d in dur.items()}
@@ -506,21 +518,25 @@ def main() -> None:
         run_snakemake(sys.argv[3:] if sys.argv[2:3] == ["--"] else sys.argv[2:])
         return
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mode", choices=["fit"])
-    ap.add_argument("runs", nargs="*", type=Path, help="workflow folders of finished runs made with `run`")
+    ap.add_argument("mode", choices=["fit", "project"])
+    ap.add_argument("runs", nargs="*", type=Path, help="workflow folders of finished runs made with `run` (project: one run, any)")
     ap.add_argument("--coarse", nargs="*", type=Path, default=[], help="runs made by plain snakemake (CPU times extrapolated)")
     ap.add_argument("--check", help="a run's folder name: compare it with the models fitted on the others")
     ap.add_argument("--configfile", nargs="*", default=[], help="config files over the paper preset for the projection")
     ap.add_argument("--nodes", type=int, default=4)
     ap.add_argument("--node-cores", type=int, default=16)
     ap.add_argument("--node-gpus", type=int, default=1)
-    ap.add_argument("--gpu-speedup", type=float, default=20.0, help="ASSUMED training speed of a GPU over one core")
     ap.add_argument(
         "--submit-overhead-s", type=float, default=10.0, help="per SLURM job: queueing and the job step's own Snakemake (measured 7-9 s: docs/cluster.md)"
     )
     ap.add_argument("--write-costs", type=Path)
     ap.add_argument("--no-projection", action="store_true", help="skip the paper preset's DAG (a minute of dry runs)")
     args = ap.parse_args()
+    if args.mode == "project":
+        cfg = paper_config(args.configfile)
+        fitted = costs.load_costs(REPO / cfg["cluster"]["costs"])["rules"]
+        print_projection(fitted, pd.concat([measured_jobs(r, coarse=True) for r in args.runs], ignore_index=True), args)
+        return
     jobs = pd.concat([measured_jobs(r, coarse=False) for r in args.runs] + [measured_jobs(r, coarse=True) for r in args.coarse], ignore_index=True)
     fitted = fit_models(jobs[jobs.run != args.check] if args.check else jobs)
     print_throughput(jobs, fitted)

@@ -40,6 +40,15 @@ def test_requests_apply_headroom_speedup_and_floors():
     assert costs.mem_mb(100, REQUESTS) == 1000
 
 
+def test_gpu_speedup_is_the_cells_most_specific_entry_and_only_with_gpus():
+    speedups = {"default": 10, "cnn3d": 300, "cnn3d_location": 700}
+    assert costs.gpu_speedup(speedups, "train", "cnn3d", "location", gpus=1) == 700
+    assert costs.gpu_speedup(speedups, "train", "cnn3d", "shape", gpus=1) == 300
+    assert costs.gpu_speedup(speedups, "train", "my_net", "size", gpus=1) == 10
+    assert costs.gpu_speedup(speedups, "train", "cnn3d", "location", gpus=0) == 1.0
+    assert costs.gpu_speedup(speedups, "rig", gpus=1) == 1.0
+
+
 def test_the_committed_cost_table_loads_and_has_the_heavy_rules():
     table = costs.load_costs(REPO / "config/costs.yaml")
     assert {"rig", "ingest", "poses", "preprocess", "train"} <= set(table["rules"])

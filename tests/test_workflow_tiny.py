@@ -334,13 +334,23 @@ def test_predict_and_export_a_tiny_capture_as_training_saw_it(tiny_run, tmp_path
     assert meta["classes"] == shape.classes
 
 
-def test_training_cells_request_the_configured_gpus(tiny_run, tmp_path):
+def test_training_cells_request_the_configured_gpus_at_their_speedup(tiny_run, tmp_path):
+    """A cell on a GPU asks for its CPU runtime over its network's
+    `cluster.gpu_speedup` (here 0.1, so ten times the CPU request)."""
     cell = "results/runs/clean/3x3/all/random/cnn1d_location/seed42/metrics.json"
-    cfg = tmp_path / "gpu.yaml"
-    cfg.write_text("train:\n  gpus: 1\n")
-    for extra, gpus in (((), 0), ((str(cfg),), 1)):
-        out = snakemake(tiny_run, "-n", "--force", cell, "--configfile", "config/presets/tiny.yaml", *extra).stdout
-        assert re.search(rf"resources: .*\bgpu={gpus}\b", out), out[-2000:]
+    (tmp_path / "cpu.yaml").write_text("cluster:\n  min_runtime_min: 1\n")
+    (tmp_path / "gpu.yaml").write_text("train:\n  gpus: 1\ncluster:\n  gpu_speedup: {default: 10, cnn1d: 0.1}\n")
+    runtime = {}
+    for extra, gpus in (((), 0), (("gpu.yaml",), 1)):
+        configs = [str(tmp_path / f) for f in ("cpu.yaml", *extra)]
+        out = snakemake(tiny_run, "-n", "--force", cell, "--configfile", "config/presets/tiny.yaml", *configs).stdout
+        train = re.search(r"rule train:\n(?:\s+.*\n)*?\s+resources: (.*)", out)[1]
+        assert re.search(rf"\bgpu={gpus}\b", train), out[-2000:]
+        runtime[gpus] = int(re.search(r"\bruntime=(\d+)", train)[1])
+    assert 10 * (runtime[0] - 1) < runtime[1] <= 10 * runtime[0]
+    linear = cell.replace("cnn1d_", "linear_")  # fits in closed form on the CPU
+    out = snakemake(tiny_run, "-n", "--force", linear, "--configfile", "config/presets/tiny.yaml", str(tmp_path / "gpu.yaml")).stdout
+    assert re.search(r"rule train:\n(?:\s+.*\n)*?\s+resources: .*\bgpu=0\b", out), out[-2000:]
 
 
 # --- digital twins ---------------------------------------------------------------

@@ -93,7 +93,20 @@ def cost_model(table: dict, rule: str, model: str | None = None, task: str | Non
     entry = table["rules"][rule]
     if rule != "train":
         return entry
-    return entry.get(f"{model}_{task}") or entry.get(model) or entry["default"]
+    return by_cell(entry, model, task)
+
+
+def by_cell(entries: dict, model: str | None, task: str | None):
+    """A training cell's value in a table keyed `<model>_<task>`, `<model>`
+    or `default`, the most specific first."""
+    return entries.get(f"{model}_{task}") or entries.get(model) or entries["default"]
+
+
+def gpu_speedup(speedups: dict[str, float], rule: str, model: str | None = None, task: str | None = None, gpus: int = 0) -> float:
+    """How many times faster than one CPU core a job runs: a training cell
+    with `gpus` > 0 at its measured speed-up (config `cluster.gpu_speedup`,
+    keyed as the cost table), anything else 1."""
+    return float(by_cell(speedups, model, task)) if rule == "train" and gpus > 0 else 1.0
 
 
 def runtime_minutes(cpu_s: float, requests: dict, speedup: float = 1.0) -> int:
