@@ -12,7 +12,7 @@ from denali_pipe.cells import Cell
 from denali_pipe.classical import run_linear
 from denali_pipe.models import PAPER_MODELS, cnn1d
 from denali_pipe.preprocess import normalise
-from denali_pipe.train import Hyper, fit, loss_for, partition, run_cell, targets, training_device, training_precision
+from denali_pipe.train import Hyper, fit, infer, loss_for, partition, run_cell, targets, training_device, training_precision
 
 CLASSES = ("A", "B", "circle")
 N_LOC, REPEATS, BINS = 8, 3, 24
@@ -144,6 +144,18 @@ def test_a_bfloat16_cell_learns_keeps_float32_weights_and_records_its_precision(
     f32 = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory())
     assert f32.metrics.precision == "float32"
     assert not all(torch.equal(res.state["model"][k], f32.state["model"][k]) for k in f32.state["model"])
+
+
+def test_inference_in_bfloat16_returns_float32_close_to_float32_inference():
+    """Validation passes run in the training precision: bfloat16 outputs are
+    float32 arrays within bfloat16's rounding (3 significant digits) of float32's."""
+    torch.manual_seed(0)
+    model = cnn1d("location", 2, (3, 3, 40))
+    x = torch.randn(300, 3, 3, 40)
+    f32, b16 = infer(model, x), infer(model, x, "cpu", torch.bfloat16)
+    assert f32.dtype == b16.dtype == np.float32 and f32.shape == b16.shape == (300, 2)
+    assert not np.array_equal(f32, b16)
+    np.testing.assert_allclose(b16, f32, rtol=0.05, atol=0.05 * np.abs(f32).max())
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")

@@ -110,8 +110,9 @@ def partition(samples: pd.DataFrame, y: np.ndarray, cell: Cell, validation_fract
 
 
 def training_precision(setting: str, device: str, cpu_has_amx: bool) -> torch.dtype:
-    """The dtype a network's training passes compute in (`torch.autocast`;
-    weights, gradients, the optimiser and every prediction stay float32).
+    """The dtype a network's training passes and its per-epoch validation
+    (model selection) compute in (`torch.autocast`; weights, gradients, the
+    optimiser and the test split's predictions stay float32).
 
     setting: config `train.precision`. `auto` is bfloat16 on a CPU with AMX
     tiles, whose matrix units multiply bfloat16 natively (the 1D CNN trains
@@ -139,14 +140,16 @@ def training_device(cuda_available: bool) -> str:
     return "cuda" if cuda_available else "cpu"
 
 
-def infer(model: nn.Module, x: torch.Tensor, device: torch.device | str = "cpu") -> np.ndarray:
-    """The model's outputs (N, C) for x (N, ...) in eval mode, in batches of
-    EVAL_BATCH moved to `device`: positions in metres or logits."""
+def infer(model: nn.Module, x: torch.Tensor, device: torch.device | str = "cpu", precision: torch.dtype = torch.float32) -> np.ndarray:
+    """The model's outputs (N, C) float32 for x (N, ...) in eval mode, in
+    batches of EVAL_BATCH moved to `device`: positions in metres or logits.
+    precision: the forward pass's dtype (torch.autocast, as `fit`'s)."""
     model.eval()
+    dev = torch.device(device)
     outs = []
-    with torch.no_grad():
+    with torch.no_grad(), torch.autocast(dev.type, dtype=precision, enabled=precision != torch.float32):
         for i in range(0, len(x), EVAL_BATCH):
-            outs.append(model(x[i : i + EVAL_BATCH].to(device)).float().cpu())
+            outs.append(model(x[i : i + EVAL_BATCH].to(dev)).float().cpu())
     return torch.cat(outs).numpy()
 
 
@@ -272,8 +275,8 @@ def run_cell(
 ) -> Result:
     """Train one cell on (N, n, n, T) features `x` with sample table `samples`
     (`fit`, with the selection metric of `selection_key` on the validation
-    part or, under `paper`, the test split; `budget_seconds` and `precision`
-    as there). The
+    part or, under `paper`, the test split, scored in `precision`;
+    `budget_seconds` as there; the test split is scored once, in float32). The
     network is model `cell.model` built by `factory` ('package.module:factory',
     the registry's contract)."""
     if cell.protocol not in PROTOCOLS:
@@ -301,7 +304,8 @@ def run_cell(
     def evaluate_epoch(epoch: int, seen: np.ndarray, out: np.ndarray) -> float:
         # training metrics from the epoch's own (train-mode) outputs: free, as the paper's curves
         rows.extend(metric_rows(epoch, "train", task_metrics(cell.task, out, y[split.train][seen])))
-        sel = task_metrics(cell.task, infer(model, x_sel, dev), y_sel)
+        # selection scores in the training precision (half the time of float32 on AMX); the test split's in float32
+        sel = task_metrics(cell.task, infer(model, x_sel, dev, precision), y_sel)
         rows.extend(metric_rows(epoch, select_on[0], sel))
         return sign * sel[metric]
 
