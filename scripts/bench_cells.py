@@ -8,9 +8,9 @@ Each row is one real cell (`train.run_cell`: normalisation, the clean
 protocol's validation part scored after every epoch, the test split scored
 once) of one (model, task) with the config's hyperparameters, on a synthetic
 benchmark of the paper's 3x3 size: 30 shapes x 2 sizes x 2 lights x 100
-locations x 3 repeats = 36,000 samples (REFERENCE: 20,160 train, 5,040
-validation, 10,800 test under the random split), each a (3, 3, BINS) histogram
-of Poisson counts. Only the epochs are cut (`--epochs`): the cell's wall time
+locations x 3 repeats = 36,000 samples (the release's 3x3 captures; 20,160
+train, 5,040 validation and 10,800 test under the clean protocol's random
+split), each a (3, 3, BINS) histogram of Poisson counts. Only the epochs are cut (`--epochs`): the cell's wall time
 per epoch (training, the validation pass, its share of the set-up) times the
 model's full schedule is the projection of the paper preset's cell, which
 trains every epoch (`train.max_epochs: null`). The labels are random, so the
