@@ -12,7 +12,7 @@ from pathlib import Path
 import pandas as pd
 
 from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
-from denali_pipe.cells import LINEAR, SPLITS, TASKS, is_ill_posed
+from denali_pipe.cells import LINEAR, SPLITS, TASKS, is_ill_posed, uses_gpu
 from denali_pipe.costs import combine, cost_model, frame_pixels, gpu_speedup, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
 from denali_pipe.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.experiments.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
@@ -390,9 +390,8 @@ def job_work(rule_name, wildcards):
 
 
 def request_gpus(wildcards):
-    """A training cell's GPUs: train.gpus for a network; none for the linear
-    model, which fits in closed form on the CPU."""
-    return 0 if wildcards.model == LINEAR else TRAIN["gpus"]
+    """A training cell's GPUs: train.gpus where its model uses a GPU (`cells.uses_gpu`)."""
+    return TRAIN["gpus"] if uses_gpu(wildcards.model) else 0
 
 
 def request_runtime(rule_name):

@@ -55,7 +55,7 @@ from scipy.optimize import nnls
 
 from denali_pipe import costs
 from denali_pipe.capture_sets import FOLDER_SUFFIX, parse_set_name
-from denali_pipe.cells import LINEAR
+from denali_pipe.cells import uses_gpu
 
 REPO = Path(__file__).resolve().parents[1]
 WORKFLOW_FILES = ("Snakefile", "rules", "config", "profiles", "envs", "report", "examples")
@@ -478,7 +478,7 @@ def print_projection(fitted: dict, jobs: pd.DataFrame, args: argparse.Namespace)
     print(f"  in all {all_cpu / 3600:.1f} CPU-h; critical path {crit / 3600:.1f} h")
     for cores in (2, 16):
         print(f"  {cores} cores: {list_schedule(dur, parents, cores) / 3600:.1f} h (list schedule; total / cores = {all_cpu / cores / 3600:.1f} h)")
-    train = {n for n, j in pjobs.items() if j["rule"] == "train" and j["model"] != LINEAR}  # the linear model fits on the CPU
+    train = {n for n, j in pjobs.items() if j["rule"] == "train" and uses_gpu(j["model"])}
     over = args.submit_overhead_s
     speedup = {n: costs.gpu_speedup(cfg["cluster"]["gpu_speedup"], j["rule"], j["model"], j["task"], gpus=int(n in train)) for n, j in pjobs.items()}
     gpu_dur = {n: d / speedup[n] + over for n, d in dur.items()}

@@ -19,6 +19,12 @@ ALL = "all"
 ILL_POSED = {("shape_held_out", "shape"), ("size_held_out", "size")}
 
 
+def uses_gpu(model: str) -> bool:
+    """Whether a model's cells can use a GPU: every network, not the linear
+    model, which fits in closed form on the CPU."""
+    return model != LINEAR
+
+
 def is_ill_posed(split: str, task: str) -> bool:
     """True for evaluations whose test labels never occur in training."""
     return (split, task) in ILL_POSED
