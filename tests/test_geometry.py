@@ -88,9 +88,10 @@ def test_zones_tile_the_wall(res):
     q = geo.intersect_plane(geo.SENSOR_POSITION, dirs, geo.WALL)
     lo, hi = geo.WALL.corners().min(0), geo.WALL.corners().max(0)
     assert np.all((q[..., [0, 2]] > lo[[0, 2]]) & (q[..., [0, 2]] < hi[[0, 2]]))
-    # row 0 looks up, column 0 looks left (toward -x)
+    # row 0 looks up; column 0 looks to the sensor's right (toward +x): the
+    # captures store the columns mirrored
     assert q[0, :, ..., 2].mean() > q[-1, :, ..., 2].mean()
-    assert q[:, 0, ..., 0].mean() < q[:, -1, ..., 0].mean()
+    assert q[:, 0, ..., 0].mean() > q[:, -1, ..., 0].mean()
     # total solid angle of the 52 x 41 deg field of view
     th, tv = np.tan(np.radians(26)), np.tan(np.radians(20.5))
     exact = 4 * np.arcsin(np.sin(np.arctan(th)) * np.sin(np.arctan(tv)))

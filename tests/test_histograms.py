@@ -140,7 +140,8 @@ def test_c_bump_of_an_8in_object_is_plain_in_one_capture(phot, mid_scene):
     capture = H.sample_counts(centre(phot, mid_scene("square", "8inch")), phot, np.random.default_rng(1))
     m = measure(capture, bg)
     assert 0.03 <= m.bump_fraction <= 0.08
-    assert m.bump_over_floor >= 1.5
+    # real ~1.5-2x, read off the figures to +-20 % (REFERENCE Part 4)
+    assert m.bump_over_floor >= 1.5 * (1 - 0.2)
     # per-bin SNR of order 10-30: the excess against the shot noise of the capture
     assert m.bump_excess / np.sqrt(capture[m.bump_bin]) > 10
 
@@ -240,11 +241,26 @@ def test_zones_are_centre_weighted_like_the_real_sensor(zone_means):
     assert np.all(np.abs(m / REAL_ZONE_MEANS - 1) < 0.3)
 
 
-def test_zones_are_brighter_to_the_right_like_the_real_sensor(zone_means):
-    # real: column 2 ~20 % above column 0, rows top and bottom within 2 %
+def test_zones_near_end_of_the_wall_is_brighter_like_the_real_sensor(zone_means):
+    # real: column 2 (the near end of the wall, the captures' columns being
+    # mirrored) ~20 % above column 0, rows top and bottom within 2 %
     ratio = zone_means[:, 2].sum() / zone_means[:, 0].sum()
     assert 1.1 < ratio < 1.35
     assert zone_means[0].sum() / zone_means[2].sum() == pytest.approx(1.0, abs=0.05)
+
+
+def test_column_0_holds_the_latest_direct_returns_like_the_release(phot):
+    # The release's figures of a real 3x3 capture (capture_setup.png, the
+    # teaser's grid): pixels 1, 4, 7 peak latest (~bin 60) and broadest,
+    # pixels 3, 6, 9 earliest (~53) and sharpest; the captures' column 0 is
+    # the far, oblique end of the wall. Pulse-free transport: the wall's own
+    # paths. (The real far column's returns are also broad, ~18 bins above
+    # 30 % of their peak; the rig's beam leaves them narrow: not asserted.)
+    wall = H.transport("3x3", [], phot).hist.reshape(3, 3, -1)
+    peak = wall.argmax(-1)
+    assert np.all(peak[:, 0] > peak[:, 1]) and np.all(peak[:, 1] > peak[:, 2])
+    # and the rows are not mirrored: the bottom row's returns come later
+    assert peak[2].sum() > peak[0].sum()
 
 
 def test_bump_width_is_the_objects_path_extent_not_the_pulse(phot, mid_scene):

@@ -71,7 +71,7 @@ def test_footprint_is_the_centre_zone_on_the_wall(cal):
 @pytest.mark.parametrize("n", [3, 8])
 def test_zone_footprints_follow_the_sensors_zone_layout(cal, n):
     """Each zone's rectangle covers the wall where geometry.zone_directions'
-    rays of that zone land (row 0 at the top, column 0 at the left)."""
+    rays of that zone land (row 0 at the top, column 0 at the sensor's right)."""
     fps = zone_footprints(cal, n)
     dirs, _ = geo.zone_directions(n, 8)
     for z, fp in enumerate(fps):
@@ -82,7 +82,7 @@ def test_zone_footprints_follow_the_sensors_zone_layout(cal, n):
         assert abs(np.ptp(rel @ fp.u) * 8 / 7 - fp.size[0]) < 0.1 * fp.size[0]
     centres = np.array([fp.centre for fp in fps]).reshape(n, n, 3)
     assert (np.diff(centres[..., 2], axis=0) < 0).all()  # row 0 at the top (+z up)
-    assert (np.diff(centres[..., 0], axis=1) > 0).all()  # column 0 at the left as the sensor sees it (+x)
+    assert (np.diff(centres[..., 0], axis=1) < 0).all()  # column 0 at the sensor's right (+x): the captures' mirrored order
     if n == 3:
         assert np.allclose(zone_footprint(cal).centre, fps[4].centre) and np.allclose(zone_footprint(cal).size, fps[4].size)
 

@@ -313,28 +313,50 @@ SENSOR_FOV_DEG = (52.0, 41.0)
 RESOLUTIONS = {"3x3": 3, "8x8": 8}
 
 
+def zone_edges(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Tangent-plane edges (horizontal, vertical), each (n + 1,), of the n x n
+    zones in the captures' order, in the sensor's camera frame (x right, y
+    down, unit focal length): row r spans vertical[r]..vertical[r + 1], column
+    c horizontal[c]..horizontal[c + 1].
+
+    Row 0 looks up. Column 0 looks to the sensor's right (+x, the far end of
+    the wall, toward the gantry): the captures store the columns mirrored, as
+    a lens images the scene onto the SPAD array. Basis: in the release's
+    figures of a real 3x3 capture, pixels 1, 4 and 7 hold the latest and
+    broadest direct returns and pixels 3, 6 and 9 the earliest and sharpest,
+    which is the far, oblique end of the wall and the near end; and with the
+    columns so ordered the real column 2 is brighter than column 0 as the
+    nearer wall is (docs/rig_zones.md). The rows are not mirrored (the real
+    bottom row's direct returns come later, as the wall below the axis is
+    farther). The 8x8 map shares the lens, so its columns are taken as
+    mirrored too."""
+    th = np.tan(np.deg2rad(SENSOR_FOV_DEG[0] / 2))
+    tv = np.tan(np.deg2rad(SENSOR_FOV_DEG[1] / 2))
+    return np.linspace(th, -th, n + 1), np.linspace(-tv, tv, n + 1)
+
+
 def zone_directions(n: int, samples_per_zone: int) -> tuple[np.ndarray, np.ndarray]:
     """Unit ray directions tiling the FoV of an n x n zone grid.
 
     Returns (dirs, solid_angle): dirs (n, n, s, s, 3) world-frame unit vectors
-    through a regular s x s sub-grid of each zone (row 0 = top, col 0 = left as
-    the sensor sees it); solid_angle (n, n, s, s) in steradians per ray.
+    through a regular s x s sub-grid of each zone, zones in the captures'
+    order (`zone_edges`); solid_angle (n, n, s, s) in steradians per ray.
     """
     R, _ = look_at(SENSOR_POSITION, SENSOR_FORWARD)
-    th = np.tan(np.deg2rad(SENSOR_FOV_DEG[0] / 2))
-    tv = np.tan(np.deg2rad(SENSOR_FOV_DEG[1] / 2))
-    m = n * samples_per_zone
-    # tangent-plane coordinates of sub-pixel centres
-    xs = (np.arange(m) + 0.5) / m * 2 - 1
-    X, Y = np.meshgrid(xs * th, xs * tv)  # Y: rows, downward in the camera frame
+    s = samples_per_zone
+    edges_h, edges_v = zone_edges(n)
+    # tangent-plane coordinates of sub-pixel centres, zone by zone
+    f = (np.arange(s) + 0.5) / s
+    xs = (edges_h[:-1, None] + f * np.diff(edges_h)[:, None]).ravel()
+    ys = (edges_v[:-1, None] + f * np.diff(edges_v)[:, None]).ravel()
+    X, Y = np.meshgrid(xs, ys)  # Y: rows, downward in the camera frame
     d_cam = np.stack([X, Y, np.ones_like(X)], -1)
     norm = np.linalg.norm(d_cam, axis=-1)
     d_cam = d_cam / norm[..., None]
     # solid angle of a tangent-plane cell of area a at unit focal length: a / |d|^3
-    cell = (2 * th / m) * (2 * tv / m)
+    cell = abs(np.diff(edges_h)[0] * np.diff(edges_v)[0]) / s**2
     omega = cell / norm**3
     d_world = d_cam @ R  # R rows are camera axes: camera -> world
-    s = samples_per_zone
     dirs = d_world.reshape(n, s, n, s, 3).transpose(0, 2, 1, 3, 4)
     omega = omega.reshape(n, s, n, s).transpose(0, 2, 1, 3)
     return dirs, omega

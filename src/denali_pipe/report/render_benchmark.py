@@ -46,7 +46,7 @@ def plot_render_benchmark(summary: pd.DataFrame, out_png: Path) -> None:
         fig.colorbar(im, ax=zax, shrink=0.7, label="normalised L2 error (%)")
         zax.set_xticks(range(3), [f"col {c}" for c in range(3)])
         zax.set_yticks(range(3), [f"row {r}" for r in range(3)])
-        zax.set_title("analytic vs reference, per zone\n(as the sensor sees them)", fontsize=9)
+        zax.set_title("analytic vs reference, per zone\n(captures' order: col 0 at the sensor's right)", fontsize=9)
     else:
         zax.axis("off")
     fig.tight_layout()

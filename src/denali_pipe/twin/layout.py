@@ -9,8 +9,8 @@ follows the paper's (supplement section 11.4):
   sensor's axis, so the spot is where the centre of the TMF8828's flood
   illumination lands on the wall;
 - every zone of the sensor's 3x3 or 8x8 grid (`geometry.SENSOR_FOV_DEG`
-  tiled as `geometry.zone_directions` tiles it: row 0 at the top, column 0
-  at the left as the sensor sees it) has its own film: the zone's wall
+  tiled as `geometry.zone_edges` tiles it, in the captures' order: row 0 at
+  the top, column 0 at the sensor's right) has its own film: the zone's wall
   footprint, a wall-aligned rectangle sampled at `film` x `film` pixel
   centres. The relay surface *is* that patch (the rest of the wall adds no
   three-bounce path between spot, object and footprint, and a whole-wall
@@ -136,8 +136,8 @@ class ZoneGeometry:
 
 
 def zone_footprints(cal: Calibration, n: int, zones: ZoneGeometry | None = None) -> list[Rect]:
-    """The wall footprints of the n x n zones, row-major (row 0 at the top,
-    column 0 at the left as the sensor sees them, the captures' order).
+    """The wall footprints of the n x n zones, row-major in the captures'
+    order (`geometry.zone_edges`: row 0 at the top, column 0 at the sensor's right).
 
     A zone's view cone meets the wall in a near-trapezoid; its rectangle
     spans the midpoints of the four edges (so its area matches the
@@ -146,14 +146,13 @@ def zone_footprints(cal: Calibration, n: int, zones: ZoneGeometry | None = None)
     zones = zones or ZoneGeometry.nominal(n)
     if zones.n != n:
         raise ValueError(f"zone geometry of a {zones.n}x{zones.n} grid given for a {n}x{n} one")
-    th, tv = (np.tan(np.deg2rad(a / 2)) for a in geo.SENSOR_FOV_DEG)
-    edges_h, edges_v = np.linspace(-th, th, n + 1), np.linspace(-tv, tv, n + 1)
+    edges_h, edges_v = geo.zone_edges(n)
     w = cal.wall
     rects = []
     for r in range(n):
         for c in range(n):
             xm, ym = (edges_h[c] + edges_h[c + 1]) / 2, (edges_v[r] + edges_v[r + 1]) / 2
-            mids = [(edges_h[c], ym), (edges_h[c + 1], ym), (xm, edges_v[r]), (xm, edges_v[r + 1])]  # left, right, top, bottom
+            mids = [(edges_h[c], ym), (edges_h[c + 1], ym), (xm, edges_v[r]), (xm, edges_v[r + 1])]  # the four edges' midpoints
             p = np.array([geo.intersect_plane(cal.sensor_position, _ray(cal, x, y), w) for x, y in mids])
             rel = p - w.centre
             pu, pv = rel @ w.u, rel @ w.v
