@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from denali_pipe import geometry as geo
+from denali_pipe.meshes import front_samples, object_mesh, sample_spacing
 from denali_pipe.report import paper
 from denali_pipe.rig import histograms as H
 from denali_pipe.rig.measure import measure
@@ -140,8 +141,7 @@ def test_c_bump_of_an_8in_object_is_plain_in_one_capture(phot, mid_scene):
     capture = H.sample_counts(centre(phot, mid_scene("square", "8inch")), phot, np.random.default_rng(1))
     m = measure(capture, bg)
     assert 0.03 <= m.bump_fraction <= 0.08
-    # real ~1.5-2x, read off the figures to +-20 % (REFERENCE Part 4)
-    assert m.bump_over_floor >= 1.5 * (1 - 0.2)
+    assert m.bump_over_floor >= 1.5
     # per-bin SNR of order 10-30: the excess against the shot noise of the capture
     assert m.bump_excess / np.sqrt(capture[m.bump_bin]) > 10
 
@@ -193,15 +193,18 @@ def test_pulse_is_unit_area_and_shifts_by_sub_bins(phot):
     assert centroid(H.pulse_kernel(phot, 0.3)) - centroid(k) == pytest.approx(0.3, abs=1e-3)  # the slow tail is cut at the window
 
 
-def test_bump_is_smooth_across_bins(phot, mid_scene):
-    # no even/odd pattern from sampling or binning: second differences of
-    # the expected bump stay far below its height
-    bg = centre(phot, mid_scene("A", "8inch")[:1])
-    bump = centre(phot, mid_scene("A", "8inch")) - bg
-    b = int(np.argmax(bump[70:])) + 70
-    window = bump[b - 6 : b + 7]
-    alternation = np.abs(window[:-1:2].mean() - window[1::2].mean())
-    assert alternation < 0.05 * bump[b]
+def test_bump_has_no_pattern_from_sampling(phot, catalogue):
+    # the expected bump is converged in the object's sampling: halving the
+    # sample spacing moves no bin by more than 1 % of the peak (a sharp edge
+    # is physics: the pulse is ~2 bins wide)
+    spec, pose = catalogue["A"], geo.object_pose(MID)
+    coarse = object_scatterer(spec, "8inch", pose)
+    points, area = front_samples(object_mesh(spec, "8inch"), sample_spacing("8inch") / 2)
+    fine = dataclasses.replace(coarse, points=pose.apply(points), normals=np.tile(coarse.normals[0], (len(points), 1)), area=area)
+    bg = centre(phot, [])
+    b_coarse, b_fine = centre(phot, [coarse]) - bg, centre(phot, [fine]) - bg
+    assert len(fine.points) > 3 * len(coarse.points)
+    assert np.abs(b_coarse - b_fine).max() < 0.01 * b_fine.max()
 
 
 def test_dead_time_lowers_every_later_bin():
@@ -249,25 +252,28 @@ def test_zones_near_end_of_the_wall_is_brighter_like_the_real_sensor(zone_means)
     assert zone_means[0].sum() / zone_means[2].sum() == pytest.approx(1.0, abs=0.05)
 
 
-def test_column_0_holds_the_latest_direct_returns_like_the_release(phot):
+def test_column_0_holds_the_latest_broadest_direct_returns_like_the_release(phot):
     # The release's figures of a real 3x3 capture (capture_setup.png, the
     # teaser's grid): pixels 1, 4, 7 peak latest (~bin 60) and broadest,
     # pixels 3, 6, 9 earliest (~53) and sharpest; the captures' column 0 is
-    # the far, oblique end of the wall. Pulse-free transport: the wall's own
-    # paths. (The real far column's returns are also broad, ~18 bins above
-    # 30 % of their peak; the rig's beam leaves them narrow: not asserted.)
+    # the far, oblique end of the wall. Peaks from the pulse-free transport
+    # (the wall's own paths), breadth from the expected counts (above 30 % of
+    # the peak: real 10-21 bins in column 0, 4-5 in column 2).
     wall = H.transport("3x3", [], phot).hist.reshape(3, 3, -1)
     peak = wall.argmax(-1)
     assert np.all(peak[:, 0] > peak[:, 1]) and np.all(peak[:, 1] > peak[:, 2])
+    counts = H.expected_counts("3x3", False, [], phot)
+    broad = (counts > 0.3 * counts.max(-1, keepdims=True)).sum(-1)
+    assert np.all(broad[:, 0] > broad[:, 2])
     # and the rows are not mirrored: the bottom row's returns come later
     assert peak[2].sum() > peak[0].sum()
 
 
 def test_bump_width_is_the_objects_path_extent_not_the_pulse(phot, mid_scene):
-    # The real 8 in bump is 4-6 bins wide (REFERENCE Part 4); the rig's is
-    # ~11 at mid gantry. Measured here: the centre zone sees the plate from
-    # ~40 deg off its normal, so 2 |q - o| spans ~9 bins across the plate;
-    # the pulse (4.6 bins FWHM) adds little and a narrower plate narrows it.
+    # At mid gantry the rig's 8 in square is ~10 bins wide: the centre zone
+    # sees the plate from ~40 deg off its normal, so 2 |q - o| spans ~9 bins
+    # across the plate; the pulse (~2 bins FWHM) adds little and a narrower
+    # plate narrows it.
     def width(name, size, p):
         bg = centre(p, mid_scene(name, size)[:1])
         return measure(centre(p, mid_scene(name, size)), bg).bump_fwhm
@@ -276,6 +282,18 @@ def test_bump_width_is_the_objects_path_extent_not_the_pulse(phot, mid_scene):
     assert width("square", "8inch", phot) > 9
     assert width("square", "8inch", sharp) > 8  # a near-delta pulse leaves the width
     assert width("square", "4inch", phot) < width("square", "8inch", phot) - 2.5
+
+
+def test_bump_width_matches_the_release_capture_at_its_gantry_location(phot, mid_scene):
+    # digital_twin.png's real capture: an 8 in "8" at gantry location 90
+    # (its tag 1 located through the tracking camera, docs/rig_zones.md),
+    # bump ~5 bins FWHM read off the figure's bars (+-20 %). The plate's
+    # path extent alone gives ~4.8 there, so this bounds the pulse. (The
+    # hexagon of capture_setup.png, at about location 84, is ~6 bins real
+    # and 7.5 in the rig: not yet reproduced, docs/rig_zones.md.)
+    scene = mid_scene("8", "8inch", 90)
+    m = measure(centre(phot, scene), centre(phot, scene[:1]))
+    assert 4.0 <= m.bump_fwhm <= 6.0
 
 
 def test_8x8_subcaptures_tile_the_grid_on_sparse_lattices():
