@@ -22,7 +22,7 @@ SETTINGS = {
     "footprint": {"film": 8, "scale": 1.0},
     "calibration": {
         "film": 2, "samples": 10, "pulse_sd_bins": 3.0, "validation_fraction": 0.2, "max_captures": 0,
-        "bootstrap_resamples": 50, "level": 0.9,
+        "bootstrap_resamples": 50, "level": 0.9, "max_evaluations": 500,
     },
 }  # fmt: skip
 GLOBALS = ("time_offset", "pulse_sd", "lobe_width_deg", "diffuse_share")
@@ -77,6 +77,13 @@ def test_planted_parameters_come_back(planted, fitted):
     # ~0.67 for calibrated normal errors)
     z = np.concatenate([np.abs(np.ravel(got[k]) - np.ravel(want[k])) / np.ravel(result.se[k]) for k in want])
     assert 0.2 < np.median(z) < 3, np.median(z)
+
+
+def test_the_fit_records_its_evaluations_and_stops_at_its_budget(fitted):
+    result, problem, _ = fitted
+    assert result.fit["converged"] and 0 < result.fit["evaluations"] <= 500
+    _, record = C.fit(problem, C.initial(SETTINGS), max_evaluations=2)
+    assert record == {"evaluations": 2, "converged": False}
 
 
 def test_held_out_residual_falls_in_every_zone(fitted):

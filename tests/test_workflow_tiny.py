@@ -406,6 +406,7 @@ def test_twin_calibration(tiny_run):
     before, after = np.array(c["residual"]["before"]["nl2"]), np.array(c["residual"]["after"]["nl2"])
     assert before.shape == after.shape == (3, 3) and after.mean() < before.mean()
     assert c["n_test_excluded"] > 0 and (tiny_run / "results/twin_calibration.png").stat().st_size > 10_000
+    assert 0 < c["fit"]["evaluations"] <= 20  # the tiny preset's budget
     twins = sorted((tiny_run / "results/twin_calibrated").glob("*.zarr"))
     assert len(twins) == 9 and all(read_twin(p).attrs["calibration"]["sha256"] for p in twins)
 

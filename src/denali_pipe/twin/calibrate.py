@@ -251,14 +251,18 @@ class Problem:
         return (self.y - g[None, :, None] * m) / self.sigma[None, :, None]
 
 
-def fit(problem: Problem, x0: np.ndarray, max_nfev: int | None = None) -> np.ndarray:
+def fit(problem: Problem, x0: np.ndarray, max_evaluations: int) -> tuple[np.ndarray, dict]:
     """The least-squares parameters (fit coordinates) from x0 (trust region
-    reflective, bounded; forward-difference Jacobian with STEP)."""
+    reflective, bounded; forward-difference Jacobian with STEP), and a record
+    of the fit: its evaluations (Jacobians not counted) and whether it
+    converged before `max_evaluations`."""
     lo, hi = _bounds(problem.settings)
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
-    res = least_squares(lambda x: problem.residuals(x).ravel(), x0, bounds=(lo, hi), diff_step=STEP, x_scale=1.0, max_nfev=max_nfev, method="trf")
+    res = least_squares(lambda x: problem.residuals(x).ravel(), x0, bounds=(lo, hi), diff_step=STEP, x_scale=1.0, max_nfev=max_evaluations, method="trf")
     log.info("calibration fit: cost %.4g after %d evaluations (%s)", res.cost, res.nfev, res.message)
-    return res.x
+    if res.status == 0:
+        log.warning("calibration fit stopped at twin.calibration.max_evaluations (%d) before converging", max_evaluations)
+    return res.x, {"evaluations": int(res.nfev), "converged": bool(res.status > 0)}
 
 
 def at_bound(x: np.ndarray, settings: dict) -> list[str]:
@@ -318,6 +322,7 @@ class Result:
     interval: dict
     x_before: np.ndarray
     gains_before: np.ndarray
+    fit: dict
 
 
 def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict, seed: int) -> tuple[Result, Problem, Problem]:
@@ -338,7 +343,7 @@ def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict,
     x0 = initial(settings)
     x_before = nuisance_fit(problem, x0)
     gains_before = problem.gains(problem.twins(x_before))
-    x = fit(problem, x_before)
+    x, fit_record = fit(problem, x_before, c["max_evaluations"])
     gains = problem.gains(problem.twins(x))
     phys = to_physical(x, settings)
     boots = [to_physical(xb, settings) for xb in linearised_bootstrap(problem, x, gains, c["bootstrap_resamples"], rng)]
@@ -346,7 +351,7 @@ def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict,
     tails = (50 * (1 - level), 50 * (1 + level))
     se = {k: np.std([np.asarray(bt[k]) for bt in boots], axis=0, ddof=1).tolist() for k in phys}
     interval = {k: np.moveaxis(np.percentile([np.asarray(bt[k]) for bt in boots], tails, axis=0), 0, -1).tolist() for k in phys}
-    result = Result(x, gains, zone_residuals(held, x_before, gains_before), zone_residuals(held, x, gains), se, interval, x_before, gains_before)
+    result = Result(x, gains, zone_residuals(held, x_before, gains_before), zone_residuals(held, x, gains), se, interval, x_before, gains_before, fit_record)
     return result, problem, held
 
 
@@ -426,6 +431,7 @@ def write_calibration(path: Path, result: Result, settings: dict, record: dict) 
         },
         "residual": {"before": result.before, "after": result.after},
         "at_bound": at_bound(result.x, settings),
+        "fit": result.fit,
         **record,
     }
     with atomic_file(Path(path)) as tmp:
