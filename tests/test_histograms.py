@@ -185,14 +185,6 @@ def test_noise_is_poisson_plus_read(phot):
     assert var == pytest.approx(expected, rel=0.1)
 
 
-def test_pulse_is_unit_area_and_shifts_by_sub_bins(phot):
-    k = H.pulse_kernel(phot)
-    assert k.sum() == pytest.approx(1.0, abs=1e-9)
-    assert k.min() > -1e-12
-    centroid = lambda kern: (kern * np.arange(-geo.N_BINS + 1, geo.N_BINS)).sum()  # noqa: E731
-    assert centroid(H.pulse_kernel(phot, 0.3)) - centroid(k) == pytest.approx(0.3, abs=1e-3)  # the slow tail is cut at the window
-
-
 def test_bump_has_no_pattern_from_sampling(phot, catalogue):
     # the expected bump is converged in the object's sampling: halving the
     # sample spacing moves no bin by more than 1 % of the peak (a sharp edge

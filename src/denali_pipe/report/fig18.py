@@ -23,13 +23,14 @@ import numpy as np
 import pandas as pd
 
 from denali_pipe import geometry as geo
+from denali_pipe import pulse
 from denali_pipe.io.store import CaptureStore, open_set
 from denali_pipe.meshes import object_mesh
 from denali_pipe.objects import spec_from_dict
 from denali_pipe.preprocess import background_means, subtract_background
 from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.seeds import derive_seed, rng_for
-from denali_pipe.twin.calibrate import delay, pulse, read_calibration
+from denali_pipe.twin.calibrate import read_calibration
 from denali_pipe.twin.layout import Calibration, load_calibration, material_of, twin_scene
 from denali_pipe.twin.render import Twin, read_twin
 
@@ -72,7 +73,7 @@ def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, calibration
     mi = load_mitsuba(config["variant"])
     cal = load_calibration(scene_json)
     fitted = read_calibration(calibration)
-    kernel = pulse(0.0, fitted.pulse_sd)  # the twin holds the time offset already
+    kernel = pulse.kernel(fitted.pulse)  # the twin holds the time offset already
     rng = rng_for(config["seed"], "fig18")
     rows = []
     fig = plt.figure(figsize=(16, 4.2 * len(captures)), constrained_layout=True)
@@ -83,7 +84,7 @@ def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, calibration
             raise ValueError(f"{set_path}, {bg_path} and {twin_path} share no gantry location")
         location = int(rng.choice(shared))
         real = real_histograms(store, bg, location)
-        sim = fitted.gains[..., None] * delay(twin.histogram(location, "3x3").astype(np.float64), kernel)
+        sim = fitted.gains[..., None] * pulse.convolve(twin.histogram(location, "3x3").astype(np.float64), kernel)
         frame = store.frame("tracking_rgb", store.index_of(location))[..., ::-1]  # BGR -> RGB
         view = twin_view(
             mi, cal, twin, location, frame.shape[:2], config["fig18"]["rgb_spp"], derive_seed(config["seed"], "fig18", store.name, location) % 2**32

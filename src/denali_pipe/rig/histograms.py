@@ -40,9 +40,9 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.special import log_ndtr, ndtr
 
 from denali_pipe import geometry as geo
+from denali_pipe import pulse
 
 # Wall sub-samples per zone side: enough that the OPL spread inside one sample
 # cell (largest in the zones that see the wall obliquely, ~3 bins) stays near
@@ -101,6 +101,11 @@ class Photometry:
     @classmethod
     def from_config(cls, d: dict) -> "Photometry":
         return cls(**{k: tuple(map(float, d[k])) if isinstance(d[k], list) else float(d[k]) for k in cls.__dataclass_fields__})
+
+    @property
+    def pulse(self) -> pulse.Pulse:
+        """The instrument response these parameters set (`denali_pipe.pulse`)."""
+        return pulse.Pulse(self.pulse_sigma_bins, self.pulse_tail_bins, self.slow_tail_bins, self.slow_tail_fraction)
 
     def emission(self, d_cam: np.ndarray) -> np.ndarray:
         """Relative VCSEL intensity (...,) toward unit directions d_cam
@@ -279,29 +284,9 @@ def _add_diffuse(hist, zone, r_q, seen, g_oq, d_oq, sc: Scatterer, phot: Photome
 
 
 def pulse_kernel(phot: Photometry, shift_bins: float = 0.0) -> np.ndarray:
-    """The unit-area pulse integrated over each bin, (2 N_BINS - 1,) for
-    delays -(N_BINS - 1)..N_BINS - 1 bins, delay 0 at the Gaussian's centre
-    when `shift_bins` is 0: a mixture of two exponentially modified
-    Gaussians (one jitter, a fast and a slow tail), in closed form from
-    their CDFs, so a sub-bin shift costs nothing and leaves no interpolation
-    pattern in the bins."""
-    edges = np.arange(-geo.N_BINS + 0.5, geo.N_BINS, 1.0) - shift_bins
-    sigma = phot.pulse_sigma_bins
-
-    def cdf(t: np.ndarray, tau: float) -> np.ndarray:
-        # exGaussian CDF: Phi(t/s) - exp(s^2 / 2 tau^2 - t / tau) Phi(t/s - s/tau), in logs for stability
-        return ndtr(t / sigma) - np.exp(sigma**2 / (2 * tau**2) - t / tau + log_ndtr(t / sigma - sigma / tau))
-
-    f = phot.slow_tail_fraction
-    c = (1 - f) * cdf(edges, phot.pulse_tail_bins) + f * cdf(edges, phot.slow_tail_bins)
-    k = np.diff(c)
-    return k / k.sum()
-
-
-def _convolve(hist: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """(Z, N_BINS) hist convolved with a `pulse_kernel`, same bins (causal in the delay)."""
-    i = np.arange(geo.N_BINS)
-    return hist @ kernel[(i[None, :] - i[:, None]) + geo.N_BINS - 1]
+    """The rig's pulse as `pulse.kernel` draws it: (2 N_BINS - 1,) for delays
+    -(N_BINS - 1)..N_BINS - 1 bins."""
+    return pulse.kernel(phot.pulse, shift_bins)
 
 
 def respond(x: np.ndarray, saturation: float, dead: np.ndarray | float) -> np.ndarray:
@@ -327,7 +312,7 @@ def _gain(phot: Photometry) -> float:
 
 @lru_cache(maxsize=None)
 def _direct_peak(phot: Photometry) -> float:
-    h = _convolve(transport(geo.REFERENCE_RESOLUTION, [], phot).hist, pulse_kernel(phot))
+    h = pulse.convolve(transport(geo.REFERENCE_RESOLUTION, [], phot).hist, pulse_kernel(phot))
     return float(h[len(h) // 2].max())
 
 
@@ -363,7 +348,7 @@ def counts_from_transport(resolution: str, light_on: bool, light: Transport, pho
     shift = np.broadcast_to(conditions.time_shift_bins, (fw.subcaptures,))
     signal = np.empty_like(light.hist)
     for s in range(fw.subcaptures):
-        signal[sub == s] = power[s] * _convolve(light.hist[sub == s], pulse_kernel(phot, float(shift[s])))
+        signal[sub == s] = power[s] * pulse.convolve(light.hist[sub == s], pulse_kernel(phot, float(shift[s])))
     floor = phot.dark_counts * zone_size + (phot.ambient_counts * conditions.ambient_gain * room * light.ambient if light_on else 0.0)
     x = iters * (_gain(phot) * signal + floor[:, None])
     # a zone's SPADs (hence its dead-time budget) scale with its solid angle;
