@@ -5,13 +5,14 @@
 
 rule crop_window:
     input:
-        lambda w: [store(s.name) for s in SETS if s.object == "NOOBJECT" and s.resolution == w.res],
+        backgrounds=lambda w: [store(s.name) for s in SETS if s.object == "NOOBJECT" and s.resolution == w.res],
+        scene="results/calibration/scene.json",
     output:
         "results/features/crop_{res}.json",
     log:
         "logs/features/crop_{res}.log",
     shell:
-        "{DENALI} crop-window {input} --out {output} > {log} 2>&1"
+        "{DENALI} crop-window {input.backgrounds} --scene {input.scene} --out {output} > {log} 2>&1"
 
 
 rule preprocess:

@@ -36,7 +36,7 @@ def rig(tmp_path_factory):
     rng = np.random.default_rng(3)
     bg, capture = {k: background_counts(rng) for k in (LOCATION - 1, LOCATION)}, background_counts(rng, shift=1)
     capture = capture + rng.poisson(300 * np.exp(-0.5 * ((np.arange(BINS) - 60) / 3.0) ** 2), size=capture.shape).astype(np.int32)
-    window = crop_window([bg[LOCATION][None]])
+    window = crop_window([bg[LOCATION][None]], np.full((3, 3), np.inf))  # no object nearer than the tails
     (root / "crop_3x3.json").write_text(json.dumps(window.to_dict()))
     paths = {}
     for name, by_location in (("bg", bg), ("obj", {k: capture for k in bg})):

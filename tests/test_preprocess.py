@@ -118,9 +118,12 @@ def test_sets_at_one_location_share_no_background_noise():
     assert abs(shared(pp.background_means(bg))) < 0.1
 
 
+NO_LEAD = np.full((3, 3), np.inf)  # no object can reach a zone before its direct return ends
+
+
 def test_crop_window_starts_each_zone_after_its_direct_return():
     bgs = [_set(L=10, seed=s) for s in (1, 2)]
-    w = pp.crop_window(bgs)
+    w = pp.crop_window(bgs, NO_LEAD)
     # zone z peaks at 45 + 2 z; its tail (2.5 bins) falls to the floor (6000 -> 1300
     # counts of excess) ln(6000 / 1300) * 2.5 ~ 3.8 bins after the peak
     peaks = 45 + 2 * np.arange(9)
@@ -132,17 +135,35 @@ def test_crop_window_starts_each_zone_after_its_direct_return():
         assert profile[z, start:].max() - floor[z] <= 1.1 * floor[z]
 
 
+def test_crop_window_never_starts_a_zone_after_its_object_signal_can():
+    # a tail that outlasts the nearest objects' returns: the zone keeps its
+    # bins from its direct onset plus the geometry's lead, less the margin
+    bgs = [_set(L=10, seed=s) for s in (1, 2)]
+    ends = pp.crop_window(bgs, NO_LEAD).zone_starts
+    onsets = np.min([pp.direct_onset(b.mean(axis=(0, 1)).reshape(9, -1), 30) for b in bgs], axis=0).reshape(3, 3)  # the earliest set's
+    assert (onsets > 16).all() and (onsets < 45 + 2 * np.arange(9).reshape(3, 3)).all()
+    lead = np.full((3, 3), 100.0)
+    lead[1, 1] = 2.5  # an object can reach the centre zone 2.5 bins after its direct onset
+    w = pp.crop_window(bgs, lead)
+    assert w.zone_starts[1, 1] == onsets[1, 1] + 2 - pp.LEAD_MARGIN_BINS < ends[1, 1]
+    others = np.ones((3, 3), bool)
+    others[1, 1] = False
+    assert np.array_equal(w.zone_starts[others], ends[others])
+    with pytest.raises(ValueError, match="lead"):
+        pp.crop_window(bgs, np.full((8, 8), 100.0))
+
+
 def test_crop_window_ignores_zones_without_a_significant_return():
     bg = _set(L=10, seed=1).astype(np.int64)
     bg[:, :, 2, 2] = np.random.default_rng(3).poisson(0.5, bg[:, :, 2, 2].shape)  # a zone of shot noise only
     ends = pp.direct_end(bg.mean(axis=(0, 1)).reshape(9, -1), n_averaged=30)
     assert ends[8] == -1 and (ends[:8] > 0).all()
-    w = pp.crop_window([bg])
+    w = pp.crop_window([bg], NO_LEAD)
     assert w.crop_start == ends[:8].min() and w.zone_starts[2, 2] == w.crop_start
 
 
 def test_crop_window_round_trips_through_json():
-    w = pp.crop_window([_set(L=4, seed=1)])
+    w = pp.crop_window([_set(L=4, seed=1)], NO_LEAD)
     back = pp.CropWindow.from_dict(w.to_dict())
     assert back.crop_start == w.crop_start and np.array_equal(back.zone_starts, w.zone_starts)
 

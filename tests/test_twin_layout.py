@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -10,7 +11,7 @@ from conftest import REPO
 
 from denali_pipe import geometry as geo
 from denali_pipe.meshes import object_mesh
-from denali_pipe.objects import load_catalogue
+from denali_pipe.objects import BOTTOM_Y, load_catalogue
 from denali_pipe.twin.layout import (
     Material,
     ZoneGeometry,
@@ -21,6 +22,7 @@ from denali_pipe.twin.layout import (
     nominal_scene,
     pixel_centres,
     pixels_inside,
+    three_bounce_lead,
     twin_scene,
     zone_footprint,
     zone_footprints,
@@ -154,3 +156,33 @@ def test_twin_scene_takes_settings(cal):
     assert tw.material == Material("lambertian", 0.4)  # no material set: the paper's
     assert twin_scene(cal, mesh, settings, 8).film == 3 and len(twin_scene(cal, mesh, settings, 8).relays) == 64  # same pixel pitch
     assert len(twin_scene(cal, mesh, {**settings, "table": False}).tables) == 0
+
+
+def _moved(cal, shift):
+    return dataclasses.replace(cal, object_poses={k: geo.pose(p.R, p.t + shift) for k, p in cal.object_poses.items()})
+
+
+def test_three_bounce_lead_is_the_least_extra_path(cal):
+    size = 0.2
+    lead = three_bounce_lead(cal, 3, size)
+    # no return arrives before the direct one, and the zones nearer the gantry
+    # (column 0, the far end of the wall) see it soonest
+    assert (lead > 0).all() and (lead[:, 0] < lead[:, 1]).all() and (lead[:, 1] < lead[:, 2]).all()
+    # a minimum: no sampled path in the centre zone beats it (within the grids' spacing)
+    s, feet = cal.sensor_position, zone_footprints(cal, 3)
+    rng = np.random.default_rng(0)
+
+    def point(r):
+        a, b = rng.uniform(-0.5, 0.5, 2)
+        return r.centre + a * r.size[0] * r.u + b * r.size[1] * r.v
+
+    nearest = 2 * min(np.linalg.norm(point(feet[4]) - s) for _ in range(2000))
+    for pose in cal.object_poses.values():
+        for _ in range(300):
+            o = pose.apply([rng.uniform(-size / 2, size / 2), BOTTOM_Y + rng.uniform(0, size), 0.0])
+            p, q = point(feet[rng.integers(9)]), point(feet[4])
+            path = np.linalg.norm(p - s) + np.linalg.norm(o - p) + np.linalg.norm(q - o) + np.linalg.norm(s - q)
+            assert path - nearest >= lead[1, 1] - 0.01
+    # larger plates and objects nearer the wall bring the returns forward
+    assert (three_bounce_lead(cal, 3, 0.1) > lead).all()
+    assert (three_bounce_lead(_moved(cal, np.array([0.0, 0.05, 0.0])), 3, size) < lead).all()

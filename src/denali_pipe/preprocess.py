@@ -24,9 +24,11 @@ each repeat stays a sample (as in the paper). Steps, per capture set:
    later-ending zone's bins before its own end to zero. Zones see their wall
    patches at different distances (peaks 16 bins apart on 3x3), and one
    window for all would either cut the object's return out of the early
-   zones or keep the late zones' tails. The window is derived from the
-   background sets of one resolution (`crop_window`), so every set of that
-   resolution, both lightings, shares it.
+   zones or keep the late zones' tails. A zone's end never passes the
+   earliest bin at which the scene's geometry lets an object's return reach
+   it (a slow tail can outlast it). The window is derived from the
+   background sets of one resolution and the scene (`crop_window`), so every
+   set of that resolution, both lightings, shares it.
 
 Normalisation (raw counts, or log1p + z-score) needs statistics over a
 training split, so it lives with training (`normalise`), not here.
@@ -52,6 +54,10 @@ DIRECT_END_FRACTION = 1.0
 FLOOR_BINS = 16
 # A zone's direct return counts only if its mean peak stands this many noise sigmas above the floor.
 SIGNIFICANCE = 5.0
+# Bins by which a zone's first kept bin precedes the earliest three-bounce
+# arrival that the geometry allows (`crop_window`): the object's pulse
+# starts its rise ~2 jitter sigmas (~1 bin) before its centre.
+LEAD_MARGIN_BINS = 1
 # Whole-bin alignment shifts searched; reaching this means the capture, not the clock, is wrong.
 MAX_SHIFT_BINS = 8
 
@@ -188,17 +194,47 @@ def read_crop_window(path: Path) -> CropWindow:
         raise ValueError(f"{path}: not a crop window ({type(e).__name__}: {e})") from None
 
 
-def crop_window(backgrounds: list[np.ndarray], fraction: float = DIRECT_END_FRACTION) -> CropWindow:
-    """Each zone's direct-return end, the latest over the given background
-    sets (each (L, R, n, n, B), one resolution), and the earliest of those."""
+def direct_onset(profile: np.ndarray, n_averaged: int) -> np.ndarray:
+    """First bin of the direct return, per zone: the first whose excess over
+    the floor stands SIGNIFICANCE noise sigmas above it (the pulse's rising
+    edge at the zone's nearest wall point, less the jitter's early tail);
+    -1 where the peak does not (as `direct_end`).
+
+    profile: (Z, B) mean counts over `n_averaged` histograms. Returns (Z,) int bins."""
+    floor = profile[:, :FLOOR_BINS].mean(axis=1)
+    excess = profile - floor[:, None]
+    sigma = np.sqrt(np.maximum(floor, 1.0) / n_averaged)
+    out = []
+    for z in range(len(profile)):
+        above = np.flatnonzero(excess[z, FLOOR_BINS:] >= SIGNIFICANCE * sigma[z])
+        out.append(FLOOR_BINS + above[0] if len(above) else -1)
+    return np.array(out)
+
+
+def crop_window(backgrounds: list[np.ndarray], lead_bins: np.ndarray, fraction: float = DIRECT_END_FRACTION) -> CropWindow:
+    """Each zone's first kept bin from the given background sets (each
+    (L, R, n, n, B), one resolution): its direct-return end (the latest over
+    the sets), but never after its object signal can begin, its direct
+    onset (the earliest over the sets) plus `lead_bins` (n, n: the least
+    extra path of a three-bounce return in the scene, bins;
+    `twin.layout.three_bounce_lead`) less LEAD_MARGIN_BINS; and the earliest
+    of those. A direct return's slow tail can outlast the start of the
+    nearest objects' returns: the end alone cut the demo's centre zone at
+    bin 83, through the bump of an 8 in plate at 15 of 100 locations."""
     if not backgrounds:
         raise ValueError("crop_window needs at least one background set")
     n = backgrounds[0].shape[2]
-    ends = np.stack([direct_end(b.mean(axis=(0, 1), dtype=np.float64).reshape(-1, b.shape[-1]), b.shape[0] * b.shape[1], fraction) for b in backgrounds]).max(
-        axis=0
-    )
+    if np.shape(lead_bins) != (n, n):
+        raise ValueError(f"three-bounce lead of shape {np.shape(lead_bins)} for {n}x{n} zones")
+    profiles = [(b.mean(axis=(0, 1), dtype=np.float64).reshape(-1, b.shape[-1]), b.shape[0] * b.shape[1]) for b in backgrounds]
+    ends = np.stack([direct_end(p, k, fraction) for p, k in profiles]).max(axis=0)
     if (ends < 0).all():
         raise ValueError("no zone of the background sets shows a significant direct return")
+    onsets = np.stack([direct_onset(p, k) for p, k in profiles])
+    onset = np.where((onsets >= 0).any(axis=0), np.where(onsets >= 0, onsets, np.iinfo(int).max).min(axis=0), -1)
+    bins = backgrounds[0].shape[-1]
+    signal = onset + np.floor(np.minimum(np.ravel(lead_bins), bins)).astype(int) - LEAD_MARGIN_BINS
+    ends = np.where((ends >= 0) & (onset >= 0), np.minimum(ends, signal), ends)
     start = int(ends[ends >= 0].min())
     return CropWindow(start, np.maximum(ends, start).reshape(n, n))
 

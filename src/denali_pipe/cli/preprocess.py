@@ -12,13 +12,23 @@ log = logging.getLogger("denali")
 def cmd_crop_window(args: argparse.Namespace) -> None:
     import json
 
+    from denali_pipe import geometry as geo
     from denali_pipe.atomic import atomic_file
     from denali_pipe.io.store import open_set
+    from denali_pipe.objects import SIZES
     from denali_pipe.preprocess import DIRECT_END_FRACTION, crop_window
+    from denali_pipe.twin.layout import load_calibration, three_bounce_lead
 
     stores = [open_set(Path(p)) for p in args.backgrounds]
-    window = crop_window([s.histograms[...] for s in stores])
-    record = {**window.to_dict(), "direct_end_fraction": DIRECT_END_FRACTION, "backgrounds": [s.name for s in stores]}
+    n = stores[0].histograms.shape[2]
+    lead = three_bounce_lead(load_calibration(Path(args.scene)), n, max(SIZES.values())) / geo.BIN_WIDTH_OPL
+    window = crop_window([s.histograms[...] for s in stores], lead)
+    record = {
+        **window.to_dict(),
+        "direct_end_fraction": DIRECT_END_FRACTION,
+        "three_bounce_lead_bins": lead.round(2).tolist(),
+        "backgrounds": [s.name for s in stores],
+    }
     with atomic_file(Path(args.out)) as tmp:
         tmp.write_text(json.dumps(record, indent=1) + "\n")
     log.info("wrote %s: first kept bin %d, per zone %s", args.out, window.crop_start, window.zone_starts.tolist())
@@ -56,6 +66,7 @@ def cmd_dataset(args: argparse.Namespace) -> None:
 def register(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("crop-window", help="first histogram bin after the direct return, from background sets")
     s.add_argument("backgrounds", nargs="+", help="NOOBJECT stores of one resolution")
+    s.add_argument("--scene", required=True, help="results/calibration/scene.json: where the objects can be")
     s.add_argument("--out", required=True, help="output crop_<res>.json")
     s.set_defaults(func=cmd_crop_window)
     s = sub.add_parser("preprocess", help="align, subtract the background and crop one capture set")
