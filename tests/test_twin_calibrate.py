@@ -24,7 +24,7 @@ SETTINGS = {
     "calibration": {
         "film": 2, "samples": 10, "validation_fraction": 0.2, "max_captures": 0,
         "bootstrap_resamples": 50, "level": 0.9, "max_evaluations": 500,
-        "pulse": {"sigma_bins": 1.0, "fast_tail_bins": 1.0, "slow_tail_bins": 10.0, "slow_share": 0.1},
+        "pulse": {"sigma_bins": 1.0, "tail_bins": 1.0},
     },
 }  # fmt: skip
 GLOBALS = (*C.GLOBALS, "lobe_width_deg", "diffuse_share")
@@ -49,8 +49,8 @@ def planted(cal, catalogue):
     truth = C.initial(SETTINGS)
     truth[:18] = rng.uniform(-1.5, 1.5, 18)  # cm
     truth[18:27] = np.log(rng.uniform(0.9, 1.15, 9))
-    # a pulse that rises in about a bin and decays over many, as a SPAD's does
-    truth[27:] = [1.7, np.log(0.8), np.log(1.5), np.log(12.0), np.log(0.25 / 0.75), np.log(14.0), np.log(0.4 / 0.6)]
+    # a pulse that rises within a bin and decays over several, as a SPAD's does
+    truth[27:] = [1.7, np.log(0.8), np.log(2.5), np.log(14.0), np.log(0.4 / 0.6)]
     dummy = C.Captures(np.zeros((len(keys), R, 3, 3, T), np.float32), keys, CROP)
     m = C.Problem(C.Model(cal, specs, keys, SETTINGS), dummy, SETTINGS).twins(truth)
     mean = rng.uniform(0.5, 2, 9)[None, :, None] * m * 1e3 / m.max()
@@ -136,7 +136,7 @@ def test_8x8_follows_the_3x3_fit(cal):
     scales = np.linspace(0.9, 1.1, 9).reshape(3, 3)
     from denali_pipe.twin.layout import Material
 
-    f = C.Fitted(offsets, scales, 0.0, Pulse(1.0, 1.0, 10.0, 0.1), np.ones((3, 3)), Material("lambertian", 0.5))
+    f = C.Fitted(offsets, scales, 0.0, Pulse(1.0, 1.0), np.ones((3, 3)), Material("lambertian", 0.5))
     z8 = f.zones(cal, 8)
     assert np.allclose(z8.offsets[..., 0], 0.012, atol=1e-9) and np.allclose(z8.offsets[..., 1], -0.004, atol=1e-9)
     assert np.allclose(z8.scales, 1.0)
@@ -144,8 +144,8 @@ def test_8x8_follows_the_3x3_fit(cal):
 
 def test_at_bound_names_the_pinned_coordinates():
     x = C.initial(SETTINGS)
-    x[0], x[3], x[20], x[27], x[30] = C.OFFSET_CM_BOUND, -C.OFFSET_CM_BOUND, np.log(3.0), -20.0, np.log(60.0)
-    assert C.at_bound(x, SETTINGS) == ["offset_u[0, 0]", "offset_v[0, 1]", "scale[0, 2]", "time_offset", "pulse_slow_tail"]
+    x[0], x[3], x[20], x[27], x[29] = C.OFFSET_CM_BOUND, -C.OFFSET_CM_BOUND, np.log(3.0), -20.0, np.log(15.0)
+    assert C.at_bound(x, SETTINGS) == ["offset_u[0, 0]", "offset_v[0, 1]", "scale[0, 2]", "time_offset", "pulse_tail"]
     assert C.at_bound(C.initial(SETTINGS), SETTINGS) == []
     # where the solver stops when pushed against a bound: just inside it
     x = C.initial(SETTINGS)

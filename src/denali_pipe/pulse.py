@@ -26,12 +26,13 @@ from denali_pipe import geometry as geo
 class Pulse:
     """sigma_bins: the jitter's sd; fast_tail_bins, slow_tail_bins: the two
     tails' time constants; slow_share: the slow tail's share of the energy
-    (0-1). All times in bins."""
+    (0-1; 0, the default, is a pulse of the jitter and the fast tail alone).
+    All times in bins."""
 
     sigma_bins: float
     fast_tail_bins: float
-    slow_tail_bins: float
-    slow_share: float
+    slow_tail_bins: float = 0.0
+    slow_share: float = 0.0
 
 
 def _exgauss_cdf(t: np.ndarray, sigma: float, tau: float) -> np.ndarray:
@@ -45,8 +46,9 @@ def kernel(p: Pulse, shift_bins: float = 0.0) -> np.ndarray:
     centre when `shift_bins` is 0. Normalised over this window (the slow
     tail beyond a histogram's length is cut)."""
     edges = np.arange(-geo.N_BINS + 0.5, geo.N_BINS, 1.0) - shift_bins
-    f = p.slow_share
-    c = (1 - f) * _exgauss_cdf(edges, p.sigma_bins, p.fast_tail_bins) + f * _exgauss_cdf(edges, p.sigma_bins, p.slow_tail_bins)
+    c = _exgauss_cdf(edges, p.sigma_bins, p.fast_tail_bins)
+    if p.slow_share > 0:
+        c = (1 - p.slow_share) * c + p.slow_share * _exgauss_cdf(edges, p.sigma_bins, p.slow_tail_bins)
     k = np.diff(c)
     return k / k.sum()
 

@@ -12,8 +12,11 @@ Parameters:
 Nuisances, fitted beside them but not part of the twin: each zone's gain
 (counts per unit of the twin's radiance: the sensor's illumination and
 response pattern, solved in closed form at every step) and the sensor's
-pulse (`denali_pipe.pulse`: jitter sd, fast and slow tails' time
-constants, the slow tail's share; the transforms model the pulse).
+pulse (`denali_pipe.pulse`: the jitter's sd and the SPAD tail's time
+constant; the transforms model the pulse). The pulse's slow part is left
+out: background subtraction leaves too little of it to identify (fitted
+on the demo, its share went to its 0.25 % bound and its time constant to
+its bound, with the held-out residual unchanged).
 
 The model of zone z of capture i is gain_z * (k * h_iz)[b], h the analytic
 twin (tent filter, `twin.calibration` film and samples) of the zone's
@@ -60,20 +63,15 @@ log = logging.getLogger(__name__)
 
 GRID = 3  # the grid the captures calibrate
 ZONES = GRID * GRID
-CALIBRATION_VERSION = 2  # 2: the SPAD pulse (jitter, fast and slow tails) in place of a Gaussian
-PULSE = ("pulse_sigma", "pulse_fast_tail", "pulse_slow_tail", "pulse_slow_share")  # the pulse's parameters, as named in the file
+CALIBRATION_VERSION = 2  # 2: the SPAD pulse (jitter and tail) in place of a Gaussian
+PULSE = ("pulse_sigma", "pulse_tail")  # the pulse's parameters, as named in the file
 GLOBALS = ("time_offset", *PULSE)  # the fit coordinates after the zones', before the material's
 # Finite-difference steps of the Jacobian, in the fit's own coordinates (see `_unpack`).
 STEP = 1e-3
 # Bounds of the fit's coordinates: offsets within +-10 cm, scales 0.3-3x, time offset +-20 bins,
-# the pulse's jitter 0.2-15 bins, fast tail 0.1-5, slow tail 5-60, slow share 0.25-99.75 %
-# (logit +-6), lobe 0.5-60 deg. The two tails' ranges meet and do not overlap: with
-# overlapping ones the fit can swap them (on the recovery test it found the slow tail's
-# 12 bins as the fast one's and vice versa, a local minimum 20 % above the truth's cost).
-# A SPAD's diffusion tail is 1-3 bins (100-200 ps); a slow part that decays within 5
-# bins would be part of it.
+# the pulse's jitter 0.2-15 bins and tail 0.1-15, lobe 0.5-60 deg.
 OFFSET_CM_BOUND = 10.0
-PULSE_BOUNDS = ((0.2, 15.0), (0.1, 5.0), (5.0, 60.0))
+PULSE_BOUNDS = ((0.2, 15.0), (0.1, 15.0))
 
 
 @dataclass(frozen=True)
@@ -167,13 +165,11 @@ def initial(settings: dict) -> np.ndarray:
     times, logit share), and with a lobe log width and logit diffuse share of
     `twin.retroreflective`."""
     p = settings["calibration"]["pulse"]
-    share = p["slow_share"]
     x = [
         *np.zeros(2 * ZONES),
         *np.full(ZONES, np.log(settings["footprint"]["scale"])),
         0.0,
-        *np.log([p["sigma_bins"], p["fast_tail_bins"], p["slow_tail_bins"]]),
-        np.log(share / (1 - share)),
+        *np.log([p["sigma_bins"], p["tail_bins"]]),
     ]
     if _rr(settings):
         lobe = settings["retroreflective"]
@@ -194,7 +190,7 @@ def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, 
     scales = np.exp(x[2 * ZONES : 3 * ZONES]).reshape(GRID, GRID)
     g = 3 * ZONES
     t0 = float(x[g])
-    p = Pulse(*(float(v) for v in np.exp(x[g + 1 : g + 4])), _logistic(x[g + 4]))
+    p = Pulse(*(float(v) for v in np.exp(x[g + 1 : g + len(GLOBALS)])))
     material = material_of(settings)
     if _rr(settings):
         m = g + len(GLOBALS)
@@ -212,8 +208,8 @@ BOUND_TOLERANCE = 1e-3
 
 
 def _bounds(settings: dict) -> tuple[np.ndarray, np.ndarray]:
-    lo = [*np.full(2 * ZONES, -OFFSET_CM_BOUND), *np.full(ZONES, np.log(0.3)), -20.0, *np.log([b[0] for b in PULSE_BOUNDS]), -6.0]
-    hi = [*np.full(2 * ZONES, OFFSET_CM_BOUND), *np.full(ZONES, np.log(3.0)), 20.0, *np.log([b[1] for b in PULSE_BOUNDS]), 6.0]
+    lo = [*np.full(2 * ZONES, -OFFSET_CM_BOUND), *np.full(ZONES, np.log(0.3)), -20.0, *np.log([b[0] for b in PULSE_BOUNDS])]
+    hi = [*np.full(2 * ZONES, OFFSET_CM_BOUND), *np.full(ZONES, np.log(3.0)), 20.0, *np.log([b[1] for b in PULSE_BOUNDS])]
     if _rr(settings):
         lo += [np.log(0.5), -6.0]
         hi += [np.log(60.0), 6.0]
@@ -294,7 +290,7 @@ def to_physical(x: np.ndarray, settings: dict) -> dict:
     footprints, `GLOBALS`, and the material's lobe."""
     zones, t0, p, material = _unpack(x, settings)
     out = {"offset_u": zones.offsets[..., 0], "offset_v": zones.offsets[..., 1], "scale": zones.scales, "time_offset": t0}
-    out |= dict(zip(PULSE, (p.sigma_bins, p.fast_tail_bins, p.slow_tail_bins, p.slow_share)))
+    out |= dict(zip(PULSE, (p.sigma_bins, p.fast_tail_bins)))
     if material.kind == "retroreflective":
         out |= {"lobe_width_deg": material.lobe_width_deg, "diffuse_share": material.diffuse_share}
     return out
@@ -433,9 +429,7 @@ def write_calibration(path: Path, result: Result, settings: dict, record: dict) 
             "scale": "x design",
             "time_offset": "bins",
             "pulse_sigma": "bins",
-            "pulse_fast_tail": "bins",
-            "pulse_slow_tail": "bins",
-            "pulse_slow_share": "1",
+            "pulse_tail": "bins",
             "lobe_width_deg": "deg",
             "diffuse_share": "1",
         },
