@@ -69,7 +69,7 @@ GLOBALS = ("time_offset", *PULSE)  # the fit coordinates after the zones', befor
 # Finite-difference steps of the Jacobian, in the fit's own coordinates (see `_unpack`).
 STEP = 1e-3
 # The fit stops when a step lowers its cost by less than this share of it. On the
-# demo (200 training captures) the fit reached it after 38 evaluations (133 CPU-s);
+# demo (200 training captures) the fit reached it after 38 evaluations (140 CPU-s);
 # at scipy's default (1e-8) it crawled on along a valley to its budget of 200
 # (820 CPU-s), lowering the cost by another 0.4 % and moving no zone's held-out
 # nl2 by more than 0.004: the twin's mismatch, not the optimiser, sets the fit.
