@@ -144,6 +144,13 @@ def subtract_background(hist: np.ndarray, background: np.ndarray) -> np.ndarray:
     return (hist.astype(np.float32) - background[:, None].astype(np.float32)).astype(np.float32)
 
 
+def _excess(profile: np.ndarray, n_averaged: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(floor (Z,), excess over it (Z, B), the Poisson noise sd of the mean
+    profile's floor (Z,)) of a (Z, B) mean over `n_averaged` histograms."""
+    floor = profile[:, :FLOOR_BINS].mean(axis=1)
+    return floor, profile - floor[:, None], np.sqrt(np.maximum(floor, 1.0) / n_averaged)
+
+
 def direct_end(profile: np.ndarray, n_averaged: int, fraction: float = DIRECT_END_FRACTION) -> np.ndarray:
     """First bin after the direct-return peak where the excess over the floor
     falls below `fraction` of the floor (at least `fraction` of one count),
@@ -152,10 +159,8 @@ def direct_end(profile: np.ndarray, n_averaged: int, fraction: float = DIRECT_EN
     'end' would be noise).
 
     profile: (Z, B) mean counts over `n_averaged` histograms. Returns (Z,) int bins."""
-    floor = profile[:, :FLOOR_BINS].mean(axis=1)
-    excess = profile - floor[:, None]
+    floor, excess, sigma = _excess(profile, n_averaged)
     peak = excess.argmax(axis=1)
-    sigma = np.sqrt(np.maximum(floor, 1.0) / n_averaged)  # Poisson noise of the mean profile
     ends = []
     for z, p in enumerate(peak):
         if excess[z, p] < SIGNIFICANCE * sigma[z]:
@@ -201,9 +206,7 @@ def direct_onset(profile: np.ndarray, n_averaged: int) -> np.ndarray:
     -1 where the peak does not (as `direct_end`).
 
     profile: (Z, B) mean counts over `n_averaged` histograms. Returns (Z,) int bins."""
-    floor = profile[:, :FLOOR_BINS].mean(axis=1)
-    excess = profile - floor[:, None]
-    sigma = np.sqrt(np.maximum(floor, 1.0) / n_averaged)
+    _, excess, sigma = _excess(profile, n_averaged)
     out = []
     for z in range(len(profile)):
         above = np.flatnonzero(excess[z, FLOOR_BINS:] >= SIGNIFICANCE * sigma[z])

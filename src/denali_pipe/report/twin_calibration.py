@@ -5,7 +5,7 @@ One panel per zone of the 3x3 grid in the captures' order (row 0 at the
 top, column 0 at the sensor's right), for the held-out capture with the
 most signal: its background-subtracted repeat mean (counts), the design
 twin (footprints as designed, no time offset; its zone gains and pulse
-width fitted) and the calibrated
+fitted) and the calibrated
 twin, both times their gains and through the fitted pulse, on the real
 bins. Each title gives the zone's held-out residual (||real - twin|| /
 ||real|| over every held-out capture) before and after. The CSV beside it

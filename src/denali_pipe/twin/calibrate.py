@@ -167,9 +167,8 @@ def _rr(settings: dict) -> bool:
 
 def initial(settings: dict) -> np.ndarray:
     """The design twin in the fit's coordinates: offsets 0 cm, log scale of
-    `footprint.scale`, time offset 0, the pulse of `calibration.pulse` (log
-    times, logit share), and with a lobe log width and logit diffuse share of
-    `twin.retroreflective`."""
+    `footprint.scale`, time offset 0, the log times of `calibration.pulse`,
+    and with a lobe log width and logit diffuse share of `twin.retroreflective`."""
     p = settings["calibration"]["pulse"]
     x = [
         *np.zeros(2 * ZONES),
@@ -190,7 +189,7 @@ def _logistic(v: float) -> float:
 
 def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, Material]:
     """Fit coordinates -> (zone geometry, time offset bins, pulse, material).
-    Offsets in cm, scales and times as logs, shares as logits: steps of
+    Offsets in cm, scales and times as logs, the diffuse share as a logit: steps of
     similar effect, and the bounds of the physical parameters hold by construction."""
     off = x[: 2 * ZONES].reshape(GRID, GRID, 2) / 100
     scales = np.exp(x[2 * ZONES : 3 * ZONES]).reshape(GRID, GRID)
