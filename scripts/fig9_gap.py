@@ -31,6 +31,7 @@ import pandas as pd
 import torch
 import yaml
 
+from denali_pipe.capture_sets import parse_set_name
 from denali_pipe.dataset import location_labels
 from denali_pipe.experiments import fig9
 from denali_pipe.metrics import predict_mean_baseline, regression_metrics
@@ -61,7 +62,11 @@ def main() -> None:
     torch.set_num_threads(cfg["train"]["threads"])
     twins = sorted((args.results / "twin_calibrated").glob("*.zarr"))
     with_twin = {t.stem for t in twins}
-    features = [f for f in sorted((args.results / "features").glob("*_3x3_lighton.zarr")) if "_".join(f.stem.split("_")[:2]) in with_twin]
+    features = []
+    for f in sorted((args.results / "features").glob("*_3x3_lighton.zarr")):
+        cs = parse_set_name(f.stem)
+        if f"{cs.object}_{cs.size}" in with_twin:
+            features.append(f)
     pairs = build_pairs(features, twins)
     zt = read_transforms(args.results / "transforms.json")
     real, sim, keys = pairs.captures()
