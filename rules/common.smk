@@ -28,6 +28,8 @@ configfile: "config/config.yaml"
 
 
 validate(config, "../config/schema.yaml")
+if config["twin"]["renderer"] == "mitransient" and config["twin"]["illumination"] == "flood":
+    raise ValueError("twin.renderer mitransient traces one laser spot: set twin.illumination: spot, or use renderer analytic for the flood")
 
 # The networks to benchmark (train.models, entries set to null left out) and
 # the model of the one-model experiments (train.benchmark_model).

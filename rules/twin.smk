@@ -10,12 +10,13 @@ TWIN_MESHES = [f for name, size in TWIN_PAIRS for f in rig_mesh_files(SimpleName
 # A twin job gets the scene settings and its renderer's own section only, so
 # that e.g. mitransient's spp reruns no analytic twin.
 TWIN = config["twin"]
+TWIN_SCENE_KEYS = ("wall_albedo", "object_albedo", "table", "table_albedo", "footprint", "material", "retroreflective", "illumination", "flood")
 TWIN_JOB_CONFIG = json.dumps(
     {
         "seed": config["seed"],
         "resolutions": config["resolutions"],
         "twin": {
-            **{k: TWIN[k] for k in ("renderer", "wall_albedo", "object_albedo", "table", "table_albedo", "footprint", "material", "retroreflective")},
+            **{k: TWIN[k] for k in ("renderer", *TWIN_SCENE_KEYS)},
             TWIN["renderer"]: TWIN[TWIN["renderer"]],
         },
     },
@@ -48,7 +49,7 @@ TWIN_CALIBRATION_CONFIG = json.dumps(
     {
         "seed": config["seed"],
         "fit": {"test_fraction": FIT["test_fraction"]},
-        "twin": {k: TWIN[k] for k in ("wall_albedo", "object_albedo", "table", "table_albedo", "footprint", "material", "retroreflective", "calibration")},
+        "twin": {k: TWIN[k] for k in (*TWIN_SCENE_KEYS, "calibration")},
     },
     sort_keys=True,
 )
@@ -109,8 +110,14 @@ rule render_benchmark:
     priority: SERIAL_CHAIN_PRIORITY
     params:
         objects=json.dumps(sorted((CATALOGUE[name].to_dict() for name in dict.fromkeys(n for n, _ in TWIN_PAIRS)), key=lambda d: d["name"]), sort_keys=True),
+        # every scene lit by the spot whatever twin.illumination says (twin/benchmark.py)
         config=json.dumps(
-            {"seed": config["seed"], "sizes": config["sizes"], "twin": {k: v for k, v in TWIN.items() if k not in ("renderer", "fig18")}}, sort_keys=True
+            {
+                "seed": config["seed"],
+                "sizes": config["sizes"],
+                "twin": {k: v for k, v in TWIN.items() if k not in ("renderer", "fig18", "illumination", "flood")},
+            },
+            sort_keys=True,
         ),
     shell:
         "{DENALI} render-benchmark {input.scene} --objects {params.objects:q} --config {params.config:q} --out {output.png} > {log} 2>&1"

@@ -28,6 +28,7 @@ SETTINGS = {
     },
 }  # fmt: skip
 GLOBALS = (*C.GLOBALS, "lobe_width_deg", "diffuse_share")
+FLOOD = {**SETTINGS, "illumination": "flood", "flood": {"grid": 2, "beam_hwhm_deg": [26.0, 20.5]}}
 
 
 @pytest.fixture(scope="module")
@@ -37,25 +38,30 @@ def cal(tmp_path_factory):
     return load_calibration(path)
 
 
-@pytest.fixture(scope="module")
-def planted(cal, catalogue):
-    """Captures drawn from the twin at known parameters: (truth, captures, specs)."""
+def _plant(cal, catalogue, settings, tail):
+    """Captures drawn from the twin at known parameters: (truth, captures, specs);
+    `tail` the fit coordinates after the zones' (`C.tail_names`)."""
     specs = {k: catalogue[k] for k in ("A", "circle")}
     keys = pd.DataFrame(
         [(f"{o}_{s}_3x3_lighton", o, s, loc) for o, s in (("A", "8inch"), ("circle", "4inch")) for loc in LOCATIONS],
         columns=["set", "object", "size", "location"],
     )
     rng = np.random.default_rng(1)
-    truth = C.initial(SETTINGS)
+    truth = C.initial(settings)
     truth[:18] = rng.uniform(-1.5, 1.5, 18)  # cm
     truth[18:27] = np.log(rng.uniform(0.9, 1.15, 9))
-    # a pulse that rises within a bin and decays over several, as a SPAD's does
-    truth[27:] = [1.7, np.log(0.8), np.log(2.5), np.log(14.0), np.log(0.4 / 0.6)]
+    truth[27:] = tail
     dummy = C.Captures(np.zeros((len(keys), R, 3, 3, T), np.float32), keys, CROP)
-    m = C.Problem(C.Model(cal, specs, keys, SETTINGS), dummy, SETTINGS).twins(truth)
+    m = C.Problem(C.Model(cal, specs, keys, settings), dummy, settings).twins(truth)
     mean = rng.uniform(0.5, 2, 9)[None, :, None] * m * 1e3 / m.max()
     real = mean[:, None] + rng.normal(0, 0.005 * mean.max(), (len(keys), R, 9, T))
     return truth, C.Captures(real.reshape(len(keys), R, 3, 3, T).astype(np.float32), keys, CROP), specs
+
+
+@pytest.fixture(scope="module")
+def planted(cal, catalogue):
+    # a pulse that rises within a bin and decays over several, as a SPAD's does
+    return _plant(cal, catalogue, SETTINGS, [1.7, np.log(0.8), np.log(2.5), np.log(14.0), np.log(0.4 / 0.6)])
 
 
 @pytest.fixture(scope="module")
@@ -123,6 +129,29 @@ def test_file_round_trips_into_calibrated_twins(cal, catalogue, fitted, tmp_path
         C.read_calibration(tmp_path / "missing.json")
 
 
+def test_under_the_flood_the_emission_widths_come_back(cal, catalogue, tmp_path):
+    """Planted under the flood (a beam narrower than the design's), the fit
+    returns the diffuse share and both emission half widths within 4
+    standard errors, fits no lobe width (the flood's narrow limit), and its
+    file makes flood twins of the fitted beam."""
+    assert C.tail_names(FLOOD) == [*C.GLOBALS, "diffuse_share", *C.EMISSION]
+    truth, captures, specs = _plant(cal, catalogue, FLOOD, [1.7, np.log(0.8), np.log(2.5), np.log(0.4 / 0.6), np.log(15.0), np.log(12.0)])
+    result, _, _ = C.calibrate(cal, specs, captures, FLOOD, seed=0)
+    want, got = C.to_physical(truth, FLOOD), C.to_physical(result.x, FLOOD)
+    assert "lobe_width_deg" not in got
+    for k in ("diffuse_share", *C.EMISSION):
+        se = float(np.asarray(result.se[k]))
+        assert 0 < se and abs(got[k] - want[k]) <= 4 * se + 1e-3 * abs(want[k]), (k, got[k], want[k], se)
+    assert (np.array(result.after["nl2"]) < np.array(result.before["nl2"])).all()
+    path = tmp_path / "twin_calibration.json"
+    C.write_calibration(path, result, FLOOD, {"n_captures": 1})
+    f = C.read_calibration(path)
+    assert f.illumination == "flood" and f.hwhm_deg == pytest.approx((got["beam_hwhm_h_deg"], got["beam_hwhm_v_deg"]))
+    tw = f.twin_scene(cal, _mesh(catalogue), {**FLOOD, "illumination": "spot"}, 3, catalogue["A"])  # the file's illumination, whatever the settings say
+    assert tw.flood is not None and tw.flood.hwhm_deg == pytest.approx(f.hwhm_deg)
+    assert tw.material.lobe_width_deg == SETTINGS["retroreflective"]["lobe_width_deg"]  # kept, unused
+
+
 def _mesh(catalogue):
     from denali_pipe.meshes import object_mesh
 
@@ -136,7 +165,7 @@ def test_8x8_follows_the_3x3_fit(cal):
     scales = np.linspace(0.9, 1.1, 9).reshape(3, 3)
     from denali_pipe.twin.layout import Material
 
-    f = C.Fitted(offsets, scales, 0.0, Pulse(1.0, 1.0), np.ones((3, 3)), Material("lambertian", 0.5))
+    f = C.Fitted(offsets, scales, 0.0, Pulse(1.0, 1.0), np.ones((3, 3)), Material("lambertian", 0.5), "spot", None)
     z8 = f.zones(cal, 8)
     assert np.allclose(z8.offsets[..., 0], 0.012, atol=1e-9) and np.allclose(z8.offsets[..., 1], -0.004, atol=1e-9)
     assert np.allclose(z8.scales, 1.0)

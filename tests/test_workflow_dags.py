@@ -19,6 +19,9 @@ PRESETS = {"tiny": ("config/presets/tiny.yaml",), "demo": (), "paper": ("config/
 SOURCES = ("synthetic", "release", "pickle")
 PROTOCOLS = ("clean", "paper")
 RENDERERS = ("analytic", "mitransient")
+ILLUMINATION = {"analytic": "flood", "mitransient": "spot"}  # mitransient traces the spot only
+# mitransient asked to render the flood: a config refused before any DAG
+FLOOD_TRACED = "flood_traced"
 COMBOS = list(itertools.product(PRESETS, SOURCES, PROTOCOLS, RENDERERS))
 PLACEHOLDERS = "placeholders"
 # a release source whose raw tree holds nothing: a DAG that must not build
@@ -32,7 +35,7 @@ ABSENT, SUFFIXED = "A_4inch_8x8_lightoff", "circle_8inch_3x3_lighton"
 
 def configfiles(wd, preset: str, source: str, protocol: str, renderer: str) -> tuple[str, ...]:
     """The preset's file, then one (written into `wd`) setting the rest."""
-    combo = {"source": source, "train": {"protocol": protocol}, "twin": {"renderer": renderer}}
+    combo = {"source": source, "train": {"protocol": protocol}, "twin": {"renderer": renderer, "illumination": ILLUMINATION[renderer]}}
     if source != "synthetic":
         combo["raw_dir"] = PLACEHOLDERS
     name = f"{preset}-{source}-{protocol}-{renderer}.yaml"
@@ -68,6 +71,7 @@ def scratch(tmp_path_factory):
     write_set(wd / SHORT, SUFFIXED, folder=f"{SUFFIXED}_short{FOLDER_SUFFIX}")
     usable = [s.name for s in tiny if s.name not in {ABSENT, SUFFIXED}]
     (wd / f"{NAMED}.yaml").write_text(yaml.safe_dump({"source": "release", "raw_dir": SHORT, "sets": usable}))
+    (wd / f"{FLOOD_TRACED}.yaml").write_text(yaml.safe_dump({"twin": {"renderer": "mitransient", "illumination": "flood"}}))
     return wd
 
 
@@ -78,6 +82,7 @@ def dags(scratch):
     argsets[EMPTY] = ("--configfile", "config/presets/tiny.yaml", "--config", "source=release", f"raw_dir={EMPTY}")
     argsets[SHORT] = ("--configfile", "config/presets/tiny.yaml", "--config", "source=release", f"raw_dir={SHORT}")
     argsets[NAMED] = ("--configfile", "config/presets/tiny.yaml", f"{NAMED}.yaml")
+    argsets[FLOOD_TRACED] = ("--configfile", "config/presets/tiny.yaml", f"{FLOOD_TRACED}.yaml")
     return dict(zip(argsets, dry_runs(scratch, list(argsets.values()))))
 
 
@@ -108,6 +113,10 @@ def test_the_demo_leaves_out_the_cells_of_its_left_out_models(scratch, dags):
 def test_a_dag_that_does_not_build_fails_with_the_reason(scratch, dags):
     n = len(preset_sets(scratch, "tiny"))
     assert f"source release: the capture tree {EMPTY} does not hold the benchmark the config asks for (0 of {n} capture sets found):" in dags[EMPTY]
+
+
+def test_mitransient_is_refused_the_flood(dags):
+    assert "twin.renderer mitransient traces one laser spot: set twin.illumination: spot" in dags[FLOOD_TRACED]
 
 
 def test_a_tree_smaller_than_configured_is_refused_with_what_is_missing(scratch, dags):

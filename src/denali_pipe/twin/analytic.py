@@ -25,19 +25,42 @@ quadrature points on its wall-facing face (`meshes.front_samples`); a
 plane plate cannot shadow itself and nothing else is in the scene, so the
 sum is exact up to quadrature.
 
-Units: radiance per unit laser intensity, per bin; the mitransient renderer
-gives the same numbers (its projector is set to unit intensity).
+Under the sensor's flood (`TwinScene.flood`) every lit wall point p is a
+spot of its own, weighted by the emission toward it; light transport is
+linear, so the render is the sum over them, with two reductions that keep
+its cost near one spot's:
+
+- the Lambertian part (all of a Lambertian object, the share d of the
+  sheeting) sees the lit wall through its irradiance E_o, summed over the
+  flood's points; each object point's paths from the laser to it are
+  placed at their irradiance-weighted mean |s - p| + |p - o| (the spread
+  of that first leg over the lit wall is dropped: the pulse and each
+  zone's own footprint spread the bump by more);
+- the retroreflective lobe is taken in its narrow limit: sheeting returns
+  light within ~1 deg of where it came from (ASTM E810's observation
+  angles), under which the emission and the wall vary little, so
+  L_o(o -> x) = (1 - d) rho_o cos_o' L_p(x): the object sends back to
+  each wall point x the light x sent it, along 2 |s - x| + 2 |x - o|. The
+  lobe's width then drops out.
+
+Units: radiance per unit laser intensity (the flood's: on its axis), per
+bin; with the spot, the mitransient renderer gives the same numbers (its
+projector is set to unit intensity).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import convolve1d
 
 from denali_pipe import geometry as geo
 from denali_pipe.meshes import front_samples
 from denali_pipe.twin.layout import Material, TwinScene, pixel_centres
 
 FILTERS = ("box", "tent")
+# Half width (bins) of the flood's first-leg spread kernel: the lit wall's
+# paths to the object span ~1 m of optical path (~8 bins either side of their mean).
+SPREAD_BINS = 16
 
 
 def brdf(material: Material, cos_theta: np.ndarray) -> np.ndarray:
@@ -73,7 +96,18 @@ class AnalyticRenderer:
         self.r_sp = float(np.linalg.norm(d_sp))
         cos_l = float(-(d_sp @ self.nw) / self.r_sp)
         self.radiance_spot = twin.wall_albedo / np.pi * cos_l / self.r_sp**2
+        if twin.flood is not None:
+            lit = twin.flood.points
+            self.r_lit = np.linalg.norm(lit - twin.sensor, axis=1)
+            self.power_lit = self.wall_radiance(lit, self.r_lit) * twin.flood.areas  # radiance x area of each lit point
         self.set_relays(twin.relays)
+
+    def wall_radiance(self, points: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """(M,) radiance of wall points (M, 3) at distance r (M,) from the
+        sensor, lit by the flood."""
+        tw = self.twin
+        cos_l = ((tw.sensor - points) @ self.nw) / r
+        return tw.wall_albedo / np.pi * tw.flood.intensity(points) * np.clip(cos_l, 0, None) / r**2
 
     def set_relays(self, relays) -> None:
         """Render onto these patches from now on (same film): the calibration moves them."""
@@ -81,15 +115,29 @@ class AnalyticRenderer:
         self.x = np.concatenate([pixel_centres(r, self.twin.film).reshape(-1, 3) for r in self.relays])
         self.r_xs = np.linalg.norm(self.x - self.twin.sensor, axis=1)
         self.xx = np.einsum("pk,pk->p", self.x, self.x)
+        if self.twin.flood is not None:
+            self.radiance_x = self.wall_radiance(self.x, self.r_xs)
 
     def object_terms(self, location: int) -> tuple:
         """What a location's render needs that no relay patch changes:
-        points o (N, 3), normal n_o (3,), unit directions to the spot (N, 3),
-        |p - o| (N,), irradiance x area (N,)."""
+        points o (N, 3), normal n_o (3,), then with the spot the unit
+        directions to it (N, 3), |p - o| (N,) and irradiance x area (N,);
+        with the flood the irradiance x area (N,) and the mean first leg
+        |s - p| + |p - o| (N,) m."""
         tw = self.twin
         pose = tw.poses[location]
         o = pose.apply(self.points)
         n_o = pose.R @ np.array([0.0, 0.0, -1.0])  # the face's normal, toward the wall
+        if tw.flood is not None:
+            d = o[:, None, :] - tw.flood.points[None, :, :]  # (N, M, 3)
+            r = np.linalg.norm(d, axis=2)
+            cos_p, cos_o = (d @ self.nw) / r, -(d @ n_o) / r
+            e = self.power_lit[None, :] * np.clip(cos_p, 0, None) * np.clip(cos_o, 0, None) / r**2
+            e_o = e.sum(axis=1)
+            leg = r + self.r_lit[None, :]
+            lead = (e * leg).sum(axis=1) / np.maximum(e_o, 1e-300)
+            spread = _bin((leg - lead[:, None]).reshape(1, -1), e.reshape(1, -1) * self.area.repeat(e.shape[1]), "tent", SPREAD_BINS)[0]
+            return o, n_o, e_o * self.area, lead, spread / max(spread.sum(), 1e-300)
         d_po = o - tw.spot
         r_po = np.linalg.norm(d_po, axis=1)
         cos_p = (d_po @ self.nw) / r_po
@@ -102,28 +150,48 @@ class AnalyticRenderer:
         `terms` reuses `object_terms(location)`."""
         tw = self.twin
         material = material or tw.material
-        o, n_o, to_spot, r_po, flux_o = terms if terms is not None else self.object_terms(location)
+        terms = terms if terms is not None else self.object_terms(location)
+        o, n_o = terms[:2]
         # o -> x terms as (P, N) outer expressions: no (P, N, 3) temporaries
         r2 = self.xx[:, None] - 2 * (self.x @ o.T) + np.einsum("nk,nk->n", o, o)[None, :]
         r_ox = np.sqrt(r2)
-        along_o = (self.x @ n_o)[:, None] - (o @ n_o)[None, :]  # (x - o) . n_o = |x - o| cos_o'
-        along_x = (o @ self.nw)[None, :] - (self.x @ self.nw)[:, None]  # -(x - o) . n_w = |x - o| cos_x
+        along_o = np.clip((self.x @ n_o)[:, None] - (o @ n_o)[None, :], 0, None)  # (x - o) . n_o = |x - o| cos_o'
+        along_x = np.clip((o @ self.nw)[None, :] - (self.x @ self.nw)[:, None], 0, None)  # -(x - o) . n_w = |x - o| cos_x
+        if tw.flood is not None:
+            return self._render_flood(material, terms, r2, r_ox, along_o, along_x)
+        _, _, to_spot, r_po, flux_o = terms
         if material.kind == "lambertian":
             f = material.albedo / np.pi
         else:  # cos of the angle between w_o = (x - o)/|x - o| and w_i (toward the spot)
             f = brdf(material, ((self.x @ to_spot.T) - np.einsum("nk,nk->n", o, to_spot)[None, :]) / r_ox)
-        w = tw.wall_albedo / np.pi * flux_o[None, :] * f * np.clip(along_o, 0, None) * np.clip(along_x, 0, None) / r2**2
+        w = tw.wall_albedo / np.pi * flux_o[None, :] * f * along_o * along_x / r2**2
         opl = self.r_xs[:, None] + r_ox + (r_po + self.r_sp + tw.time_offset_opl)[None, :]
         return _bin(opl, w, self.filter).reshape(len(self.relays), tw.film, tw.film, geo.N_BINS)
 
+    def _render_flood(self, material: Material, terms: tuple, r2, r_ox, along_o, along_x) -> np.ndarray:
+        """The flood's render (module docstring) from the (P, N) o -> x terms."""
+        tw = self.twin
+        _, _, flux_o, lead, spread = terms
+        share = material.diffuse_share if material.kind == "retroreflective" else 1.0
+        geometry = tw.wall_albedo / np.pi * along_o * along_x / r2**2  # rho_w/pi cos_o' cos_x / |x - o|^2
+        opl = self.r_xs[:, None] + r_ox + (lead + tw.time_offset_opl)[None, :]
+        out = _bin(opl, geometry * (share * material.albedo / np.pi) * flux_o[None, :], self.filter)
+        out = convolve1d(out, spread, axis=1, mode="constant")
+        if share < 1:
+            back = geometry * ((1 - share) * material.albedo * self.area)[None, :] * (along_o / r_ox) * self.radiance_x[:, None]
+            out += _bin(2 * (self.r_xs[:, None] + r_ox) + tw.time_offset_opl, back, self.filter)
+        return out.reshape(len(self.relays), tw.film, tw.film, geo.N_BINS)
 
-def _bin(opl: np.ndarray, weight: np.ndarray, filter: str = "box") -> np.ndarray:
+
+def _bin(opl: np.ndarray, weight: np.ndarray, filter: str = "box", centred: int | None = None) -> np.ndarray:
     """Weights (P, N) at sensor-relative paths opl (P, N) into (P, N_BINS),
     box filtered (into the bin holding the path) or tent filtered (shared
-    between the two bin centres around it, linearly)."""
+    between the two bin centres around it, linearly). With `centred`, opl
+    are path differences binned into 2 centred + 1 bins about 0 instead."""
     p = opl.shape[0]
-    pos = geo.opl_to_bin(opl)
-    rows = np.arange(p)[:, None] * geo.N_BINS
+    pos = geo.opl_to_bin(opl) if centred is None else opl / geo.BIN_WIDTH_OPL + centred + 0.5
+    n_bins = geo.N_BINS if centred is None else 2 * centred + 1
+    rows = np.arange(p)[:, None] * n_bins
     if filter == "box":
         parts = [(np.floor(pos).astype(np.int64), weight)]
     else:
@@ -131,8 +199,8 @@ def _bin(opl: np.ndarray, weight: np.ndarray, filter: str = "box") -> np.ndarray
         b = np.floor(c)
         frac = c - b
         parts = [(b.astype(np.int64), weight * (1 - frac)), (b.astype(np.int64) + 1, weight * frac)]
-    out = np.zeros(p * geo.N_BINS)
+    out = np.zeros(p * n_bins)
     for b, wt in parts:
-        keep = (b >= 0) & (b < geo.N_BINS) & (wt > 0)
-        out += np.bincount((rows + b)[keep], wt[keep], p * geo.N_BINS)
-    return out.reshape(p, geo.N_BINS)
+        keep = (b >= 0) & (b < n_bins) & (wt > 0)
+        out += np.bincount((rows + b)[keep], wt[keep], p * n_bins)
+    return out.reshape(p, n_bins)

@@ -7,8 +7,13 @@ Parameters:
   zone's iFoV against the design FoV's ninth);
 - a global time offset (bins, added to every path: the captures' time zero
   against the twin's);
-- with `twin.material: retroreflective`, the object's lobe width (deg) and
-  diffuse share.
+- with `twin.material: retroreflective`, the object's diffuse share and,
+  under the spot, its lobe width (deg; under the flood the lobe's narrow
+  limit holds and its width drops out, `twin.analytic`);
+- under `twin.illumination: flood`, the emission's half widths (deg,
+  horizontal and vertical): how much light each part of the wall gets, which
+  sets each zone's retroreflected return against the light every zone's
+  footprint sends the object.
 Nuisances, fitted beside them but not part of the twin: each zone's gain
 (counts per unit of the twin's radiance: the sensor's illumination and
 response pattern, solved in closed form at every step) and the sensor's
@@ -63,7 +68,7 @@ log = logging.getLogger(__name__)
 
 GRID = 3  # the grid the captures calibrate
 ZONES = GRID * GRID
-CALIBRATION_VERSION = 2  # 2: the SPAD pulse (jitter and tail) in place of a Gaussian
+CALIBRATION_VERSION = 3  # 3: the flood's emission widths; 2: the SPAD pulse (jitter and tail) in place of a Gaussian
 PULSE = ("pulse_sigma", "pulse_tail")  # the pulse's parameters, as named in the file
 GLOBALS = ("time_offset", *PULSE)  # the fit coordinates after the zones', before the material's
 # Finite-difference steps of the Jacobian, in the fit's own coordinates (see `_unpack`).
@@ -75,15 +80,19 @@ STEP = 1e-3
 # nl2 by more than 0.004: the twin's mismatch, not the optimiser, sets the fit.
 COST_TOLERANCE = 1e-4
 # Bounds of the fit's coordinates: offsets within +-10 cm, scales 0.3-3x, time offset +-20 bins,
-# the pulse's jitter 0.2-15 bins and tail 0.1-15, lobe 0.5-60 deg.
+# the pulse's jitter 0.2-15 bins and tail 0.1-15, lobe 0.5-60 deg, emission half widths 3-90 deg.
 OFFSET_CM_BOUND = 10.0
 PULSE_BOUNDS = ((0.2, 15.0), (0.1, 15.0))
+HWHM_BOUNDS_DEG = (3.0, 90.0)
+EMISSION = ("beam_hwhm_h_deg", "beam_hwhm_v_deg")  # the flood's parameters, as named in the file
 
 
 @dataclass(frozen=True)
 class Fitted:
     """A calibration: offsets (3, 3, 2) m, scales (3, 3), time_offset
-    (bins), the pulse, gains (3, 3) counts per radiance, material."""
+    (bins), the pulse, gains (3, 3) counts per radiance, material, the
+    illumination it was fitted under and, for the flood, its emission half
+    widths (deg, horizontal and vertical)."""
 
     offsets: np.ndarray
     scales: np.ndarray
@@ -91,6 +100,8 @@ class Fitted:
     pulse: Pulse
     gains: np.ndarray
     material: Material
+    illumination: str
+    hwhm_deg: tuple[float, float] | None
 
     def zones(self, cal: Calibration, n: int) -> ZoneGeometry:
         """The footprints of an n x n grid: the fit itself for 3x3, its affine
@@ -108,7 +119,10 @@ class Fitted:
         """The calibrated twin of `mesh` on the n x n grid (non-RR objects stay Lambertian)."""
         rr = spec.material == "retroreflective"
         material = self.material if rr else material_of(settings, False)
-        return twin_scene(cal, mesh, settings, n, zones=self.zones(cal, n), material=material, time_offset_opl=self.time_offset * geo.BIN_WIDTH_OPL)
+        return twin_scene(
+            cal, mesh, {**settings, "illumination": self.illumination}, n, zones=self.zones(cal, n), material=material,
+            time_offset_opl=self.time_offset * geo.BIN_WIDTH_OPL, hwhm_deg=self.hwhm_deg,
+        )  # fmt: skip
 
 
 # --- the data ---------------------------------------------------------------------------
@@ -138,17 +152,28 @@ class Model:
 
     def __init__(self, cal: Calibration, specs: dict, keys: pd.DataFrame, settings: dict):
         self.cal, self.settings, self.keys = cal, settings, keys
-        c = settings["calibration"]
-        self.renderers, self.terms = {}, []
-        for (name, size), _ in keys.groupby(["object", "size"], sort=False):
-            mesh = object_mesh(specs[name], size)
-            tw = twin_scene(cal, mesh, {**settings, "footprint": {**settings["footprint"], "film": c["film"]}}, GRID)
-            self.renderers[(name, size)] = AnalyticRenderer(tw, c["samples"], "tent")
-        for name, size, location in zip(keys["object"], keys["size"], keys["location"]):
-            self.terms.append(((name, size), int(location), self.renderers[(name, size)].object_terms(int(location))))
+        self.meshes = {(name, size): object_mesh(specs[name], size) for (name, size), _ in keys.groupby(["object", "size"], sort=False)}
+        self.hwhm_deg = None
+        self._light(tuple(settings["flood"]["beam_hwhm_deg"]) if _flood(settings) else None)
 
-    def zone(self, z: int, zones: ZoneGeometry, material: Material) -> np.ndarray:
-        """(N, N_BINS) zone z's twin (mean over its film) for every capture."""
+    def _light(self, hwhm_deg: tuple[float, float] | None) -> None:
+        """Renderers and object terms under the flood of `hwhm_deg` (None: the spot)."""
+        c = self.settings["calibration"]
+        scene = {**self.settings, "footprint": {**self.settings["footprint"], "film": c["film"]}}
+        self.renderers = {
+            key: AnalyticRenderer(twin_scene(self.cal, mesh, scene, GRID, hwhm_deg=hwhm_deg), c["samples"], "tent") for key, mesh in self.meshes.items()
+        }
+        self.terms = [
+            ((name, size), int(location), self.renderers[(name, size)].object_terms(int(location)))
+            for name, size, location in zip(self.keys["object"], self.keys["size"], self.keys["location"])
+        ]
+        self.hwhm_deg = hwhm_deg
+
+    def zone(self, z: int, zones: ZoneGeometry, material: Material, hwhm_deg: tuple[float, float] | None = None) -> np.ndarray:
+        """(N, N_BINS) zone z's twin (mean over its film) for every capture,
+        under the flood of emission half widths `hwhm_deg` (None: the spot)."""
+        if hwhm_deg != self.hwhm_deg:
+            self._light(hwhm_deg)
         rect = zone_footprints(self.cal, GRID, zones)[z]
         out = []
         for key, location, terms in self.terms:
@@ -165,10 +190,25 @@ def _rr(settings: dict) -> bool:
     return settings.get("material", "lambertian") == "retroreflective"
 
 
+def _flood(settings: dict) -> bool:
+    return settings.get("illumination", "spot") == "flood"
+
+
+def tail_names(settings: dict) -> list[str]:
+    """The fit's coordinates after the zones', by name: `GLOBALS`, the
+    material's (the lobe width under the spot only), the flood's emission."""
+    names = list(GLOBALS)
+    if _rr(settings):
+        names += ["diffuse_share"] if _flood(settings) else ["lobe_width_deg", "diffuse_share"]
+    return names + (list(EMISSION) if _flood(settings) else [])
+
+
 def initial(settings: dict) -> np.ndarray:
     """The design twin in the fit's coordinates: offsets 0 cm, log scale of
     `footprint.scale`, time offset 0, the log times of `calibration.pulse`,
-    and with a lobe log width and logit diffuse share of `twin.retroreflective`."""
+    with a retroreflective object the logit diffuse share (and under the
+    spot the log lobe width) of `twin.retroreflective`, under the flood the
+    log emission widths of `flood.beam_hwhm_deg`."""
     p = settings["calibration"]["pulse"]
     x = [
         *np.zeros(2 * ZONES),
@@ -179,7 +219,9 @@ def initial(settings: dict) -> np.ndarray:
     if _rr(settings):
         lobe = settings["retroreflective"]
         d = lobe["diffuse_share"]
-        x += [np.log(lobe["lobe_width_deg"]), np.log(d / (1 - d))]
+        x += ([] if _flood(settings) else [np.log(lobe["lobe_width_deg"])]) + [np.log(d / (1 - d))]
+    if _flood(settings):
+        x += list(np.log(settings["flood"]["beam_hwhm_deg"]))
     return np.array(x, float)
 
 
@@ -187,9 +229,10 @@ def _logistic(v: float) -> float:
     return float(1 / (1 + np.exp(-v)))
 
 
-def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, Material]:
-    """Fit coordinates -> (zone geometry, time offset bins, pulse, material).
-    Offsets in cm, scales and times as logs, the diffuse share as a logit: steps of
+def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, Material, tuple[float, float] | None]:
+    """Fit coordinates -> (zone geometry, time offset bins, pulse, material,
+    the flood's emission half widths (deg) or None under the spot).
+    Offsets in cm, scales, times and widths as logs, the diffuse share as a logit: steps of
     similar effect, and the bounds of the physical parameters hold by construction."""
     off = x[: 2 * ZONES].reshape(GRID, GRID, 2) / 100
     scales = np.exp(x[2 * ZONES : 3 * ZONES]).reshape(GRID, GRID)
@@ -197,10 +240,12 @@ def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, 
     t0 = float(x[g])
     p = Pulse(*(float(v) for v in np.exp(x[g + 1 : g + len(GLOBALS)])))
     material = material_of(settings)
+    tail = dict(zip(tail_names(settings), x[g:]))
     if _rr(settings):
-        m = g + len(GLOBALS)
-        material = Material("retroreflective", material.albedo, float(np.exp(x[m])), _logistic(x[m + 1]))
-    return ZoneGeometry(off, scales), t0, p, material
+        width = float(np.exp(tail["lobe_width_deg"])) if "lobe_width_deg" in tail else material.lobe_width_deg
+        material = Material("retroreflective", material.albedo, width, _logistic(tail["diffuse_share"]))
+    hwhm = tuple(float(np.exp(tail[k])) for k in EMISSION) if _flood(settings) else None
+    return ZoneGeometry(off, scales), t0, p, material, hwhm
 
 
 # The trust-region solver keeps its iterates strictly inside the bounds and
@@ -215,9 +260,10 @@ BOUND_TOLERANCE = 1e-3
 def _bounds(settings: dict) -> tuple[np.ndarray, np.ndarray]:
     lo = [*np.full(2 * ZONES, -OFFSET_CM_BOUND), *np.full(ZONES, np.log(0.3)), -20.0, *np.log([b[0] for b in PULSE_BOUNDS])]
     hi = [*np.full(2 * ZONES, OFFSET_CM_BOUND), *np.full(ZONES, np.log(3.0)), 20.0, *np.log([b[1] for b in PULSE_BOUNDS])]
-    if _rr(settings):
-        lo += [np.log(0.5), -6.0]
-        hi += [np.log(60.0), 6.0]
+    tail = {"lobe_width_deg": np.log([0.5, 60.0]), "diffuse_share": (-6.0, 6.0), **dict.fromkeys(EMISSION, np.log(HWHM_BOUNDS_DEG))}
+    for name in tail_names(settings)[len(GLOBALS) :]:
+        lo.append(tail[name][0])
+        hi.append(tail[name][1])
     return np.array(lo), np.array(hi)
 
 
@@ -235,18 +281,18 @@ class Problem:
         self.sigma = np.maximum(self.sigma, 1e-9)
         self.cache: dict = {}
 
-    def zone_twin(self, z: int, zones: ZoneGeometry, material: Material) -> np.ndarray:
-        key = (z, *zones.offsets[divmod(z, GRID)].round(12), round(float(zones.scales[divmod(z, GRID)]), 12), material)
+    def zone_twin(self, z: int, zones: ZoneGeometry, material: Material, hwhm_deg) -> np.ndarray:
+        key = (z, *zones.offsets[divmod(z, GRID)].round(12), round(float(zones.scales[divmod(z, GRID)]), 12), material, hwhm_deg)
         if key not in self.cache:
             if len(self.cache) > 4 * ZONES:
                 self.cache.clear()
-            self.cache[key] = self.model.zone(z, zones, material)
+            self.cache[key] = self.model.zone(z, zones, material, hwhm_deg)
         return self.cache[key]
 
     def twins(self, x: np.ndarray) -> np.ndarray:
         """(N, Z, T) the twins blurred by the pulse, in the real bins (before the gains)."""
-        zones, t0, p, material = _unpack(x, self.settings)
-        h = np.stack([self.zone_twin(z, zones, material) for z in range(ZONES)], axis=1)
+        zones, t0, p, material, hwhm = _unpack(x, self.settings)
+        h = np.stack([self.zone_twin(z, zones, material, hwhm) for z in range(ZONES)], axis=1)
         return pulse.convolve(h, pulse.kernel(p, t0))[..., self.crop : self.crop + self.T]
 
     def gains(self, m: np.ndarray) -> np.ndarray:
@@ -287,20 +333,22 @@ def at_bound(x: np.ndarray, settings: dict) -> list[str]:
     spread says nothing."""
     lo, hi = _bounds(settings)
     names = [f"offset_{'uv'[i % 2]}[{i // 2 // GRID}, {i // 2 % GRID}]" for i in range(2 * ZONES)]
-    names += [f"scale[{z // GRID}, {z % GRID}]" for z in range(ZONES)] + [*GLOBALS, "lobe_width_deg", "diffuse_share"][: len(x) - 3 * ZONES]
+    names += [f"scale[{z // GRID}, {z % GRID}]" for z in range(ZONES)] + tail_names(settings)
     tol = BOUND_TOLERANCE * (hi - lo)
     return [n for n, v, a, b, t in zip(names, x, lo, hi, tol) if v - a < t or b - v < t]
 
 
 def to_physical(x: np.ndarray, settings: dict) -> dict:
     """The fit coordinates as the named physical parameters: the zones'
-    footprints, `GLOBALS`, and the material's lobe."""
-    zones, t0, p, material = _unpack(x, settings)
+    footprints, `GLOBALS`, the material's lobe and the flood's emission (`tail_names`)."""
+    zones, t0, p, material, hwhm = _unpack(x, settings)
     out = {"offset_u": zones.offsets[..., 0], "offset_v": zones.offsets[..., 1], "scale": zones.scales, "time_offset": t0}
     out |= dict(zip(PULSE, (p.sigma_bins, p.fast_tail_bins)))
     if material.kind == "retroreflective":
         out |= {"lobe_width_deg": material.lobe_width_deg, "diffuse_share": material.diffuse_share}
-    return out
+    if hwhm is not None:
+        out |= dict(zip(EMISSION, hwhm))
+    return {k: v for k, v in out.items() if k in ("offset_u", "offset_v", "scale") or k in tail_names(settings)}
 
 
 def zone_residuals(problem: Problem, x: np.ndarray, gains: np.ndarray) -> dict:
@@ -429,6 +477,9 @@ def write_calibration(path: Path, result: Result, settings: dict, record: dict) 
         "grid": f"{GRID}x{GRID}",
         "material": material_of(settings).kind,
         "object_albedo": float(settings["object_albedo"]),
+        "illumination": settings.get("illumination", "spot"),
+        # the twin's settings it needs and the fit left alone: under the flood the lobe's width
+        "fixed": {"lobe_width_deg": float(settings["retroreflective"]["lobe_width_deg"])},
         "parameters": {k: np.asarray(v).tolist() for k, v in phys.items()},
         "units": {
             "offset_u": "m",
@@ -439,6 +490,7 @@ def write_calibration(path: Path, result: Result, settings: dict, record: dict) 
             "pulse_tail": "bins",
             "lobe_width_deg": "deg",
             "diffuse_share": "1",
+            **dict.fromkeys(EMISSION, "deg"),
         },
         "se": result.se,
         "interval": result.interval,
@@ -465,13 +517,12 @@ def read_calibration(path: Path) -> Fitted:
             raise ValueError(f"version {d.get('denali_twin_calibration')!r}, expected {CALIBRATION_VERSION}")
         p = d["parameters"]
         offsets = np.stack([np.asarray(p["offset_u"], float), np.asarray(p["offset_v"], float)], axis=-1)
-        settings = {
-            "material": d["material"],
-            "object_albedo": d["object_albedo"],
-            "retroreflective": {k: p.get(k) for k in ("lobe_width_deg", "diffuse_share")},
-        }
-        material = material_of(settings)
+        lobe = {**d["fixed"], **{k: p[k] for k in ("lobe_width_deg", "diffuse_share") if k in p}}
+        material = material_of({"material": d["material"], "object_albedo": d["object_albedo"], "retroreflective": lobe})
         pulse_of = Pulse(*(float(p[k]) for k in PULSE))
-        return Fitted(offsets, np.asarray(p["scale"], float), float(p["time_offset"]), pulse_of, np.asarray(d["gains"], float), material)
+        hwhm = tuple(float(p[k]) for k in EMISSION) if d["illumination"] == "flood" else None
+        return Fitted(
+            offsets, np.asarray(p["scale"], float), float(p["time_offset"]), pulse_of, np.asarray(d["gains"], float), material, d["illumination"], hwhm
+        )
     except (OSError, KeyError, TypeError, ValueError) as e:
         raise ValueError(f"{path}: not a twin calibration ({type(e).__name__}: {e})") from None

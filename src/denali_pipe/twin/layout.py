@@ -5,9 +5,12 @@ by `poses.calibrate.scene_dict`): relay wall, table tops, sensor pose,
 tracking camera, object pose per gantry location. On top of it the twin
 follows the paper's (supplement section 11.4):
 
-- one laser spot: a pulsed point source at the sensor aimed along the
-  sensor's axis, so the spot is where the centre of the TMF8828's flood
-  illumination lands on the wall;
+- the illumination (`twin.illumination`): the paper's one laser spot, a
+  pulsed point source at the sensor aimed along the sensor's axis (where
+  the centre of the TMF8828's flood lands on the wall), or the flood
+  itself: the VCSEL lighting the sensor's whole field of view, with an
+  elliptical Gaussian emission profile about the axis (`Flood`; its widths
+  fitted from the captures by `twin.calibrate`);
 - every zone of the sensor's 3x3 or 8x8 grid (`geometry.SENSOR_FOV_DEG`
   tiled as `geometry.zone_edges` tiles it, in the captures' order: row 0 at
   the top, column 0 at the sensor's right) has its own film: the zone's wall
@@ -40,6 +43,7 @@ from denali_pipe.geometry import Camera, Intrinsics, Pose, Rect
 from denali_pipe.objects import BOTTOM_Y
 
 MATERIALS = ("lambertian", "retroreflective")
+ILLUMINATIONS = ("spot", "flood")
 
 
 @dataclass(frozen=True)
@@ -199,6 +203,41 @@ def three_bounce_lead(cal: Calibration, n: int, plate_size: float) -> np.ndarray
     return np.array(out).reshape(n, n)
 
 
+@dataclass(frozen=True)
+class Flood:
+    """The sensor's flood illumination: relative radiant intensity
+    exp(-ln 2 [(a_h / hwhm_h)^2 + (a_v / hwhm_v)^2]) toward a direction at
+    angles a_h, a_v (deg) from the sensor's axis across and along its field
+    (1 on the axis; `hwhm_deg` (2,) the half widths at half maximum).
+
+    points (M, 3) and areas (M,) m^2: the lit wall, sampled as a `grid` x
+    `grid` film over each design 3x3 zone footprint (the field the VCSEL
+    lights is the field the zones see). sensor_rotation (3, 3): sensor ->
+    world, OpenCV axes."""
+
+    hwhm_deg: tuple[float, float]
+    points: np.ndarray
+    areas: np.ndarray
+    sensor: np.ndarray
+    sensor_rotation: np.ndarray
+
+    def intensity(self, points: np.ndarray) -> np.ndarray:
+        """(...,) relative intensity toward world points (..., 3)."""
+        d = (points - self.sensor) @ self.sensor_rotation  # into the sensor's frame: x right, y down, z forward
+        a_h = np.rad2deg(np.arctan2(d[..., 0], d[..., 2])) / self.hwhm_deg[0]
+        a_v = np.rad2deg(np.arctan2(d[..., 1], d[..., 2])) / self.hwhm_deg[1]
+        return np.exp(-np.log(2) * (a_h**2 + a_v**2))
+
+
+def flood(cal: Calibration, hwhm_deg, grid: int) -> Flood:
+    """The flood of emission half widths `hwhm_deg` (h, v) over the design
+    3x3 footprints, each sampled at `grid` x `grid` points."""
+    feet = zone_footprints(cal, 3)
+    points = np.concatenate([pixel_centres(r, grid).reshape(-1, 3) for r in feet])
+    areas = np.concatenate([np.full(grid * grid, r.size[0] * r.size[1] / grid**2) for r in feet])
+    return Flood(tuple(float(v) for v in hwhm_deg), points, areas, cal.sensor_position, cal.sensor_rotation)
+
+
 def zone_footprint(cal: Calibration, scale: float = 1.0) -> Rect:
     """The centre zone's footprint of the 3x3 grid (the paper's film), scaled by `scale`."""
     return zone_footprints(cal, 3, ZoneGeometry.nominal(3, scale))[4]
@@ -274,7 +313,8 @@ class TwinScene:
 
     relays: the films' wall patches (one per zone, row-major, or the whole
     wall); film: pixels per side of each; sensor: (3,) the sensor and laser
-    origin; spot: (3,) the laser spot on the wall; mesh: the object's full
+    origin; spot: (3,) where the sensor's axis meets the wall (the laser
+    spot); flood: the flood illumination, None for the spot alone; mesh: the object's full
     mesh (local); vertices/faces: its wall-facing face (local); poses:
     {location: object pose}; material: the object's; time_offset_opl: m of
     optical path added to every path (the captures' time zero against the
@@ -293,6 +333,7 @@ class TwinScene:
     time_offset_opl: float = 0.0
     tables: tuple[Rect, ...] = ()
     table_albedo: float = 0.0
+    flood: Flood | None = None
 
     @property
     def object_albedo(self) -> float:
@@ -315,13 +356,21 @@ def twin_scene(
     film: int | None = None,
     material: Material | None = None,
     time_offset_opl: float = 0.0,
+    hwhm_deg=None,
 ) -> TwinScene:
     """The twin of one object mesh from the calibration and the config's
-    `twin` section (footprint, albedos, material, table), with one film per
+    `twin` section (footprint, albedos, material, table, illumination), with one film per
     zone of the n x n grid (`zone_footprints` of `zones`, the design FoV
     scaled by `footprint.scale` when None). `relays`/`film` override the
     patches and their film (the benchmark's whole-wall film); `material`
-    the configured one (`material_of`)."""
+    the configured one (`material_of`); `hwhm_deg` the flood's configured
+    emission widths (`flood.beam_hwhm_deg`). No illumination set: the paper's spot."""
+    illumination = twin.get("illumination", "spot")
+    if illumination not in ILLUMINATIONS:
+        raise ValueError(f"unknown twin illumination {illumination!r}; expected one of {list(ILLUMINATIONS)}")
+    lit = None
+    if illumination == "flood":
+        lit = flood(cal, twin["flood"]["beam_hwhm_deg"] if hwhm_deg is None else hwhm_deg, twin["flood"]["grid"])
     vertices, faces = front_face(mesh)
     if relays is None:
         relays = tuple(zone_footprints(cal, n, zones or ZoneGeometry.nominal(n, twin["footprint"]["scale"])))
@@ -339,6 +388,7 @@ def twin_scene(
         time_offset_opl=float(time_offset_opl),
         tables=cal.tables if twin["table"] else (),
         table_albedo=float(twin["table_albedo"]),
+        flood=lit,
     )
 
 

@@ -95,6 +95,10 @@ class MitransientRenderer:
     name = "mitransient"
 
     def __init__(self, twin: TwinScene, spp: int, max_depth: int, seed: int, variant: str = "auto"):
+        if twin.flood is not None:
+            raise ValueError(
+                "the mitransient renderer traces one laser spot (capture_type 1); set twin.illumination: spot, or use renderer analytic for the flood"
+            )
         self.mi = mi = load_mitsuba(variant)
         self.twin, self.spp, self.seed = twin, int(spp), int(seed)
         integrator = "transient_nlos_path"
