@@ -246,6 +246,16 @@ def test_render_job_writes_the_twin_store(scene_json, catalogue, tmp_path):
     with pytest.raises(KeyError, match="no location 3"):
         t.histogram(3)
     assert not any(p.name.startswith(".") for p in tmp_path.iterdir())
+    assert t.attrs["illumination"] == "spot" and t.attrs["flood_hwhm_deg"] is None
+
+
+def test_a_flood_twin_store_says_how_it_was_lit(scene_json, catalogue, tmp_path):
+    out = tmp_path / "circle_8inch.zarr"
+    settings = {**FLOOD, "footprint": {"film": 2, "scale": 1.0}, "analytic": {"samples": 20}}
+    render_twin(catalogue["circle"], "8inch", scene_json, {"seed": 7, "resolutions": ["3x3"], "twin": settings}, out)
+    t = read_twin(out)
+    assert t.attrs["illumination"] == "flood" and t.attrs["flood_hwhm_deg"] == FLOOD["flood"]["beam_hwhm_deg"]
+    assert (t.histograms["3x3"].sum(axis=-1) > 0).all()
 
 
 def test_version_1_twin_store_is_refused(tmp_path):

@@ -402,13 +402,16 @@ def test_renderer_settings_rerun_only_what_uses_them(tiny_run, tmp_path):
 def test_twin_calibration(tiny_run):
     c = json.loads((tiny_run / "results/twin_calibration.json").read_text())
     assert np.shape(c["parameters"]["scale"]) == (3, 3) and set(c["se"]) == set(c["parameters"])
-    assert {"time_offset", "lobe_width_deg", "diffuse_share"} <= set(c["parameters"])  # the tiny preset's object is retroreflective
+    # the tiny preset's object is retroreflective, lit by the flood: no lobe width (its narrow limit), the beam's widths
+    assert {"time_offset", "diffuse_share", "beam_hwhm_h_deg", "beam_hwhm_v_deg"} <= set(c["parameters"]) and "lobe_width_deg" not in c["parameters"]
+    assert c["illumination"] == "flood"
     before, after = np.array(c["residual"]["before"]["nl2"]), np.array(c["residual"]["after"]["nl2"])
     assert before.shape == after.shape == (3, 3) and after.mean() < before.mean()
     assert c["n_test_excluded"] > 0 and (tiny_run / "results/twin_calibration.png").stat().st_size > 10_000
     assert 0 < c["fit"]["evaluations"] <= 20  # the tiny preset's budget
     twins = sorted((tiny_run / "results/twin_calibrated").glob("*.zarr"))
     assert len(twins) == 9 and all(read_twin(p).attrs["calibration"]["sha256"] for p in twins)
+    assert all(read_twin(p).attrs["flood_hwhm_deg"] == [c["parameters"][k] for k in ("beam_hwhm_h_deg", "beam_hwhm_v_deg")] for p in twins)
 
 
 def test_transforms_and_fig9(tiny_run):

@@ -16,6 +16,8 @@ resolutions, renderer, config (the `twin` settings used), material,
 calibration (twin_calibration.json's path and sha256, or None for the
 design geometry), seed, bin_width_opl, start_opl, time_offset_opl,
 footprints ({grid: [centre, u, v, size] per zone}), laser_spot, sensor,
+illumination ("spot" or "flood") and flood_hwhm_deg (the flood's emission
+half widths, deg, horizontal and vertical; None under the spot),
 scene_json (path and sha256), seconds (wall time per location, all grids).
 
 Version 1 stores (the centre zone only) are refused: rerender them.
@@ -77,7 +79,7 @@ def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out
     config: {"seed": int, "resolutions": ["3x3", ...], "twin": the twin
     section (renderer, albedos, material, footprint, table and the chosen
     renderer's settings)}. calibration: twin_calibration.json (`twin.calibrate`):
-    its footprints, time offset and lobe replace the design's."""
+    its footprints, time offset, lobe and illumination replace the design's."""
     settings = config["twin"]
     cal = load_calibration(scene_json)
     mesh = object_mesh(spec, size)
@@ -121,6 +123,8 @@ def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out
         "time_offset_opl": twin.time_offset_opl,
         "footprints": footprints,
         "laser_spot": twin.spot.tolist(),
+        "illumination": "spot" if twin.flood is None else "flood",
+        "flood_hwhm_deg": None if twin.flood is None else list(twin.flood.hwhm_deg),
         "sensor": twin.sensor.tolist(),
         "scene_json": _sha(scene_json),
         "seconds": seconds.tolist(),
