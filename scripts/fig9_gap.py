@@ -15,7 +15,11 @@ transforms' seed) and per panel (`experiments.fig9.PANELS`), the test RMSE
   first is near the second, the twins hold the real captures' location cue;
 - Fig 9's 1D CNN (its hyperparameters, its twins' copies) trained on the
   noisy twins alone, scored on the test captures' noisy twins and on their
-  real repeats: sim->sim bounds what the localiser learns from twins at all.
+  real repeats: sim->sim bounds what the localiser learns from twins at all;
+- on the all-zone panel, the same CNN with one zone zeroed in its twins and
+  in the real test captures, zone by zone: a zone whose removal lowers the
+  error on the real captures is one whose twin teaches the localiser what
+  the real zone does not show.
 
 The twins are `results/twin_calibrated`, the real captures the 3x3 light-on
 feature stores that have one (the fit's sets).
@@ -51,6 +55,13 @@ def nearest(train_x: np.ndarray, train_y: np.ndarray, test_x: np.ndarray) -> np.
     a, b = train_x.reshape(len(train_x), -1), test_x.reshape(len(test_x), -1)
     d = (b**2).sum(1)[:, None] - 2 * b @ a.T + (a**2).sum(1)[None, :]
     return train_y[d.argmin(1)]
+
+
+def zero_zone(x: np.ndarray, row: int, col: int) -> np.ndarray:
+    """A copy of samples x (N, n, n, T) with zone (row, col) zeroed."""
+    out = x.copy()
+    out[:, row, col] = 0
+    return out
 
 
 def main() -> None:
@@ -103,6 +114,12 @@ def main() -> None:
         print(f"\n{panel} (test RMSE, m)")
         for name, value in rows.items():
             print(f"  {name:<32}{value:.3f}")
+        if len(zones) > 1:
+            print("  1D CNN on noisy twins -> real, one zone zeroed in both (row, column: RMSE):")
+            for r, c in np.ndindex(x_sim.shape[1:3]):
+                model, stats = fig9.train_localiser(zero_zone(x_sim, r, c), y_sim, hp, SEED, torch.float32)
+                real_rmse = rmse(fig9.bound_to_workspace(fig9.predict(model, stats, zero_zone(x_test, r, c), hp.norm), *box), y_test)
+                print(f"    ({r}, {c}): {real_rmse:.3f}")
 
 
 if __name__ == "__main__":
