@@ -20,6 +20,7 @@ from denali_pipe.geometry import N_BINS, N_LOCATIONS, RESOLUTIONS, select_locati
 from denali_pipe.io.tree import survey_tree
 from denali_pipe.objects import BACKGROUNDS, VARIANTS, load_catalogue
 from denali_pipe.registry import check_left_out, check_models
+from denali_pipe.twin.illumination import check_renderer
 
 min_version("9.0")
 
@@ -28,8 +29,7 @@ configfile: "config/config.yaml"
 
 
 validate(config, "../config/schema.yaml")
-if config["twin"]["renderer"] == "mitransient" and config["twin"]["illumination"] == "flood":
-    raise ValueError("twin.renderer mitransient traces one laser spot: set twin.illumination: spot, or use renderer analytic for the flood")
+check_renderer(config["twin"]["renderer"], config["twin"]["illumination"])
 
 # The networks to benchmark (train.models, entries set to null left out) and
 # the model of the one-model experiments (train.benchmark_model).

@@ -153,8 +153,7 @@ class Model:
     def __init__(self, cal: Calibration, specs: dict, keys: pd.DataFrame, settings: dict):
         self.cal, self.settings, self.keys = cal, settings, keys
         self.meshes = {(name, size): object_mesh(specs[name], size) for (name, size), _ in keys.groupby(["object", "size"], sort=False)}
-        self.hwhm_deg = None
-        self._light(tuple(settings["flood"]["beam_hwhm_deg"]) if _flood(settings) else None)
+        self._light(_unpack(initial(settings), settings)[-1])  # the design's light, as the fit's first step computes it
 
     def _light(self, hwhm_deg: tuple[float, float] | None) -> None:
         """Renderers and object terms under the flood of `hwhm_deg` (None: the spot)."""
@@ -169,7 +168,7 @@ class Model:
         ]
         self.hwhm_deg = hwhm_deg
 
-    def zone(self, z: int, zones: ZoneGeometry, material: Material, hwhm_deg: tuple[float, float] | None = None) -> np.ndarray:
+    def zone(self, z: int, zones: ZoneGeometry, material: Material, hwhm_deg: tuple[float, float] | None) -> np.ndarray:
         """(N, N_BINS) zone z's twin (mean over its film) for every capture,
         under the flood of emission half widths `hwhm_deg` (None: the spot)."""
         if hwhm_deg != self.hwhm_deg:
@@ -342,13 +341,10 @@ def to_physical(x: np.ndarray, settings: dict) -> dict:
     """The fit coordinates as the named physical parameters: the zones'
     footprints, `GLOBALS`, the material's lobe and the flood's emission (`tail_names`)."""
     zones, t0, p, material, hwhm = _unpack(x, settings)
-    out = {"offset_u": zones.offsets[..., 0], "offset_v": zones.offsets[..., 1], "scale": zones.scales, "time_offset": t0}
-    out |= dict(zip(PULSE, (p.sigma_bins, p.fast_tail_bins)))
-    if material.kind == "retroreflective":
-        out |= {"lobe_width_deg": material.lobe_width_deg, "diffuse_share": material.diffuse_share}
-    if hwhm is not None:
-        out |= dict(zip(EMISSION, hwhm))
-    return {k: v for k, v in out.items() if k in ("offset_u", "offset_v", "scale") or k in tail_names(settings)}
+    tail = {"time_offset": t0, **dict(zip(PULSE, (p.sigma_bins, p.fast_tail_bins)))}
+    tail |= {"lobe_width_deg": material.lobe_width_deg, "diffuse_share": material.diffuse_share, **dict(zip(EMISSION, hwhm or ()))}
+    out = {"offset_u": zones.offsets[..., 0], "offset_v": zones.offsets[..., 1], "scale": zones.scales}
+    return out | {k: tail[k] for k in tail_names(settings)}
 
 
 def zone_residuals(problem: Problem, x: np.ndarray, gains: np.ndarray) -> dict:

@@ -41,9 +41,9 @@ import trimesh
 from denali_pipe import geometry as geo
 from denali_pipe.geometry import Camera, Intrinsics, Pose, Rect
 from denali_pipe.objects import BOTTOM_Y
+from denali_pipe.twin.illumination import check_illumination
 
 MATERIALS = ("lambertian", "retroreflective")
-ILLUMINATIONS = ("spot", "flood")
 
 
 @dataclass(frozen=True)
@@ -356,7 +356,7 @@ def twin_scene(
     film: int | None = None,
     material: Material | None = None,
     time_offset_opl: float = 0.0,
-    hwhm_deg=None,
+    hwhm_deg: tuple[float, float] | None = None,
 ) -> TwinScene:
     """The twin of one object mesh from the calibration and the config's
     `twin` section (footprint, albedos, material, table, illumination), with one film per
@@ -366,8 +366,7 @@ def twin_scene(
     the configured one (`material_of`); `hwhm_deg` the flood's configured
     emission widths (`flood.beam_hwhm_deg`). No illumination set: the paper's spot."""
     illumination = twin.get("illumination", "spot")
-    if illumination not in ILLUMINATIONS:
-        raise ValueError(f"unknown twin illumination {illumination!r}; expected one of {list(ILLUMINATIONS)}")
+    check_illumination(illumination)
     lit = None
     if illumination == "flood":
         lit = flood(cal, twin["flood"]["beam_hwhm_deg"] if hwhm_deg is None else hwhm_deg, twin["flood"]["grid"])

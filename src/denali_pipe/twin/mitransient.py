@@ -29,6 +29,7 @@ from types import ModuleType
 import numpy as np
 
 from denali_pipe.seeds import derive_seed
+from denali_pipe.twin.illumination import check_renderer
 from denali_pipe.twin.layout import TwinScene
 from denali_pipe.twin.scene import transient_scene
 from denali_pipe.twin.variant import load_mitsuba
@@ -95,10 +96,7 @@ class MitransientRenderer:
     name = "mitransient"
 
     def __init__(self, twin: TwinScene, spp: int, max_depth: int, seed: int, variant: str = "auto"):
-        if twin.flood is not None:
-            raise ValueError(
-                "the mitransient renderer traces one laser spot (capture_type 1); set twin.illumination: spot, or use renderer analytic for the flood"
-            )
+        check_renderer(self.name, "spot" if twin.flood is None else "flood")
         self.mi = mi = load_mitsuba(variant)
         self.twin, self.spp, self.seed = twin, int(spp), int(seed)
         integrator = "transient_nlos_path"
