@@ -4,6 +4,7 @@
 # results/report.html` collects every table and figure with its caption.
 
 
+from denali_pipe.cli import warm_start
 from denali_pipe.scheduler_timer import keep_one_reevaluation_timer
 from denali_pipe.targets import target_files
 
@@ -35,3 +36,18 @@ rule all:
     input:
         # every paper artefact, from the one table `denali targets` lists
         target_files(TWIN_PAIRS),
+
+
+# Jobs fork from one warm interpreter instead of each importing torch and
+# friends afresh (config `warm_start`); local runs only, since cluster jobs
+# run on other machines.
+onstart:
+    warm_start.start(config["warm_start"] and workflow.local_exec, Path("logs/warm_start.log"))
+
+
+onsuccess:
+    warm_start.stop()
+
+
+onerror:
+    warm_start.stop()

@@ -23,7 +23,7 @@ rule preprocess:
     output:
         directory("results/features/{set}.zarr"),
     log:
-        "logs/features/{set}.log",
+        "logs/preprocess/{set}.log",
     benchmark:
         "benchmarks/preprocess/{set}.tsv"
     resources:

@@ -56,6 +56,7 @@ from scipy.optimize import nnls
 from denali_pipe import costs
 from denali_pipe.capture_sets import FOLDER_SUFFIX, parse_set_name
 from denali_pipe.cells import uses_gpu
+from denali_pipe.cli import warm_start
 
 REPO = Path(__file__).resolve().parents[1]
 WORKFLOW_FILES = ("Snakefile", "rules", "config", "profiles", "envs", "report", "examples")
@@ -91,12 +92,16 @@ def run_snakemake(args: list[str]) -> None:
     after its 15th second (the demo's 43-s training cells read ~15 CPU-s).
     Local jobs are sampled in this process's threads, so the default
     interval patched here applies to all of them.
+
+    Every job starts afresh (no warm start): a warm job's work runs in the
+    server's fork, outside the process tree its benchmark samples.
     """
     from snakemake import benchmark, cli
 
     measure = benchmark.benchmarked.__wrapped__  # the generator under @contextmanager
     pid, record, _ = measure.__defaults__
     measure.__defaults__ = (pid, record, benchmark.BENCHMARK_INTERVAL_SHORT)
+    warm_start.start = lambda enabled, log: None
     sys.argv = ["snakemake", *args]
     cli.main()
 
@@ -151,6 +156,18 @@ def train_row(run: Path, bench: Path) -> dict:
     }
 
 
+def check_cold(run: Path, bench: Path) -> None:
+    """Refuse a job that ran warm (its log, at the benchmark's path under
+    logs/, carries the worker's usage line): its benchmark measured the
+    client, not the work."""
+    job_log = run / "logs" / bench.relative_to(run / "benchmarks").with_suffix(".log")
+    if job_log.exists() and warm_start.USAGE_PREFIX in job_log.read_text(errors="replace"):
+        raise SystemExit(
+            f"{bench}: the job ran warm ({job_log} says so), so its benchmark measured only its client;"
+            " measure with `bench_stages.py run` or `--config warm_start=False`"
+        )
+
+
 def measured_jobs(run: Path, coarse: bool) -> pd.DataFrame:
     """One row per benchmarked job of the fitted stages: its rule, measured
     CPU seconds, peak MB, MB read + written, work terms, and `units` (the
@@ -162,6 +179,7 @@ def measured_jobs(run: Path, coarse: bool) -> pd.DataFrame:
         rule = "train" if parts[0] == "results" else parts[0]
         if rule not in CPU_TERMS:
             continue
+        check_cold(run, bench)
         rec = pd.read_csv(bench, sep="\t").iloc[0]
         stretch = full_cpu(rec.s, rec.cpu_time) / rec.cpu_time if coarse and rec.cpu_time > 0 else 1.0
         row = {"run": run.name or str(run), "rule": rule, "job": bench.stem, "wall_s": rec.s, "cpu_s": rec.cpu_time * stretch}
