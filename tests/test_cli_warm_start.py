@@ -61,8 +61,8 @@ def sleeper(tmp_path):
     server.wait(10)
 
 
-def client(socket_path: Path | None, cwd: Path, *argv: str, **popen) -> subprocess.Popen:
-    env = {**os.environ, "JOB_NAME": "job7"}
+def client(socket_path: Path | None, cwd: Path, *argv: str, env: dict | None = None, **popen) -> subprocess.Popen:
+    env = {**os.environ, "JOB_NAME": "job7", **(env or {})}
     env.pop(warm_start.ENV, None)
     if socket_path is not None:
         env[warm_start.ENV] = str(socket_path)
@@ -85,6 +85,45 @@ def test_the_worker_takes_the_clients_streams_directory_environment_and_exit_sta
     usage = json.loads(err.split(warm_start.USAGE_PREFIX)[1])
     assert set(usage) == {"cpu_s", "max_rss_mb"}
     assert int((tmp_path / "pid").read_text()) != job.pid  # it ran in the server's worker
+
+
+# A server that preloaded numpy and torch (their pools sized for every core):
+# its jobs print the pool sizes they run with.
+POOLS = """
+import sys
+from pathlib import Path
+import denali_pipe.cli as cli
+from denali_pipe.cli import warm_start
+
+def main(argv):
+    import torch
+    from threadpoolctl import threadpool_info
+    blas = {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+    print(sorted(blas), torch.get_num_threads())
+    return 0
+
+cli.main = main
+warm_start.PRELOAD = ("numpy", "torch")
+warm_start.serve(Path(sys.argv[1]), int(sys.argv[3]))
+"""
+
+
+def test_the_worker_runs_with_the_thread_pools_its_job_was_given(tmp_path):
+    socket_path = tmp_path / "socket"
+    server = start_server(socket_path, [sys.executable, "-c", POOLS])
+    try:
+        sizes = {}
+        for threads in ("1", "2"):
+            job = client(
+                socket_path, tmp_path, env={"OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads}, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+            )
+            out, err = job.communicate(timeout=60)
+            assert job.returncode == 0 and warm_start.USAGE_PREFIX in err, err
+            sizes[threads] = out.strip()
+    finally:
+        server.terminate()
+        server.wait(10)
+    assert sizes == {"1": "[1] 1", "2": "[2] 2"}
 
 
 def test_a_signal_to_the_client_stops_the_worker(sleeper, tmp_path):

@@ -19,8 +19,11 @@ importing, gone, or a cluster node that cannot see it), the client runs the
 job itself, so a job never depends on the server.
 
 The worker is the same code on the same inputs in a process whose imports
-are done and nothing else: the server runs nothing before it forks (the
-test `test_cli_warm_start` holds a training cell's metrics equal both ways).
+are done and nothing else: the server runs nothing before it forks, and the
+worker resizes the loaded thread pools to the job's `threads:`
+(`_limit_threads`), since the order in which threads add decides the last
+digits (`tests/test_cli_warm_start.py` holds a training cell's metrics and
+weights equal both ways).
 What differs is what Snakemake's `benchmark:` files see: they measure the
 job's own process tree, which now holds the client only. The worker
 therefore appends its own CPU time and peak memory to the job's log
@@ -78,6 +81,9 @@ PRELOAD = (
     "denali_pipe.twin.analytic",
     "denali_pipe.transforms",
 )
+# The environment variables that size a job's thread pools (Snakemake sets
+# them to the rule's threads), by threadpoolctl's name for the pool.
+THREAD_VARIABLES = {"openmp": "OMP_NUM_THREADS", "blas": "OPENBLAS_NUM_THREADS"}
 # How the worker's resource use reaches the job's log (stderr), one line.
 USAGE_PREFIX = "denali warm start: worker usage "
 # The server exits within this many seconds of the Snakemake process that
@@ -252,6 +258,7 @@ def _work(request: dict, fds: list[int]) -> None:
     os.chdir(request["cwd"])
     os.environ.clear()
     os.environ.update(request["env"])
+    _limit_threads(request["env"])
     sys.argv = ["denali", *request["argv"]]
     code = 1
     try:
@@ -271,6 +278,21 @@ def _work(request: dict, fds: list[int]) -> None:
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)
+
+
+def _limit_threads(env: dict[str, str]) -> None:
+    """Give the loaded thread pools the job's sizes. Snakemake tells a job its
+    `threads:` through OMP_NUM_THREADS and OPENBLAS_NUM_THREADS, which
+    OpenMP and OpenBLAS read when they load, and the server loaded them
+    before any job: without this a 1-thread job's linear algebra would run
+    on every core, and add in another order than the same job afresh."""
+    from threadpoolctl import threadpool_limits
+
+    limits = {api: int(env[var]) for api, var in THREAD_VARIABLES.items() if env.get(var, "").isdigit()}
+    if limits:
+        threadpool_limits(limits)
+    if "openmp" in limits and "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(limits["openmp"])
 
 
 def main() -> None:
