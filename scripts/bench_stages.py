@@ -161,7 +161,7 @@ def check_cold(run: Path, bench: Path) -> None:
     logs/, carries the worker's usage line): its benchmark measured the
     client, not the work."""
     job_log = run / "logs" / bench.relative_to(run / "benchmarks").with_suffix(".log")
-    if job_log.exists() and warm_start.USAGE_PREFIX in job_log.read_text(errors="replace"):
+    if job_log.exists() and warm_start.worker_usage(job_log.read_text(errors="replace")) is not None:
         raise SystemExit(
             f"{bench}: the job ran warm ({job_log} says so), so its benchmark measured only its client;"
             " measure with `bench_stages.py run` or `--config warm_start=False`"

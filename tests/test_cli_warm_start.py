@@ -82,8 +82,9 @@ def test_the_worker_takes_the_clients_streams_directory_environment_and_exit_sta
     assert job.returncode == 3
     assert out == "out job7\n"
     assert err.startswith("err\n") and warm_start.USAGE_PREFIX in err
-    usage = json.loads(err.split(warm_start.USAGE_PREFIX)[1])
-    assert set(usage) == {"cpu_s", "max_rss_mb"}
+    usage = warm_start.worker_usage(err)
+    assert set(usage) == {"cpu_s", "max_rss_mb"} and usage["max_rss_mb"] > 0
+    assert warm_start.worker_usage("a job that ran afresh\n") is None
     assert int((tmp_path / "pid").read_text()) != job.pid  # it ran in the server's worker
 
 

@@ -13,6 +13,7 @@ import torch
 from workflow import copy_workflow, job_counts, snakemake
 
 from denali_pipe.capture_sets import expected_sets
+from denali_pipe.cli.warm_start import worker_usage
 from denali_pipe.conditions import TABLES as CONDITION_TABLES
 from denali_pipe.conditions import table_conditions
 from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE
@@ -377,9 +378,10 @@ def test_fig18_and_the_twins_it_uses(tiny_run):
         assert t.histograms["3x3"].shape == (12, 3, 3, 128) and t.histograms["8x8"].shape == (12, 8, 8, 128)
         assert (t.histograms["3x3"].sum(axis=-1) > 0).any(axis=(1, 2)).all()
         name = path.name.removesuffix(".zarr")
-        bench = pd.read_csv(tiny_run / f"benchmarks/twin/{name}.tsv", sep="\t")
-        assert bench.max_rss.max() < 2000  # MB per job
-        assert (tiny_run / f"logs/twin/{name}.log").exists()
+        # a warm job's benchmark sampled its client: its worker logged its own peak
+        usage = worker_usage((tiny_run / f"logs/twin/{name}.log").read_text())
+        peak = usage["max_rss_mb"] if usage else pd.read_csv(tiny_run / f"benchmarks/twin/{name}.tsv", sep="\t").max_rss.max()
+        assert 100 < peak < 2000  # MB per job
 
 
 def test_renderer_settings_rerun_only_what_uses_them(tiny_run, tmp_path):

@@ -171,6 +171,14 @@ def hand_off(argv: list[str]) -> int | None:
     return code if code >= 0 else 128 - code
 
 
+def worker_usage(log_text: str) -> dict | None:
+    """The usage a warm worker appended to its job's log ({"cpu_s": CPU
+    seconds, "max_rss_mb": peak resident MB, the server's pages it maps
+    included}), or None for a job that ran afresh."""
+    _, found, rest = log_text.rpartition(USAGE_PREFIX)
+    return json.loads(rest.splitlines()[0]) if found else None
+
+
 def serve(socket_path: Path, owner: int) -> None:
     """Import `PRELOAD`, then serve jobs on `socket_path` until process
     `owner` (the Snakemake run) ends or SIGTERM arrives."""
