@@ -267,7 +267,6 @@ def _work(request: dict, fds: list[int]) -> None:
     os.environ.clear()
     os.environ.update(request["env"])
     _limit_threads(request["env"])
-    sys.argv = ["denali", *request["argv"]]
     code = 1
     try:
         from denali_pipe.cli import main
