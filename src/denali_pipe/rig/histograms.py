@@ -72,10 +72,14 @@ class Photometry:
         their photons (its SPADs fire once per laser cycle: SPADs per zone
         x cycles, in the firmware's count units).
     read_noise_counts: Gaussian read noise on top of Poisson shot noise.
-    beam_hwhm_deg, beam_order: the VCSEL's emission profile, an elliptical
-        super-Gaussian 2^-(((ax / hx)^2 + (ay / hy)^2)^order) of the angles
-        ax (horizontal) and ay (vertical) from its axis: half widths at half
-        maximum (hx, hy) in degrees, and order (1 = Gaussian).
+    beam_hwhm_deg, beam_order: the flood the VCSEL's microlens array
+        spreads, an elliptical super-Gaussian 2^-(((ax / hx)^2 + (ay / hy)^2)^order)
+        of the angles ax (horizontal) and ay (vertical) from the beam axis:
+        half widths at half maximum (hx, hy) in degrees, and order (1 = Gaussian).
+    core_share, core_hwhm_deg: the light that leaves the microlens array
+        unspread and keeps the VCSEL's own divergence, a round Gaussian on the
+        same axis (half width at half maximum, degrees): its share of the
+        on-axis intensity (the flood has the rest).
     beam_yaw_deg, beam_pitch_deg: the beam axis's pointing offset from the
         receiver's optical axis, degrees toward the sensor's right and up.
     vignetting_power: the receive lens's relative illumination cos^n of the
@@ -94,6 +98,8 @@ class Photometry:
     read_noise_counts: float
     beam_hwhm_deg: tuple[float, float]
     beam_order: float
+    core_share: float
+    core_hwhm_deg: float
     beam_yaw_deg: float
     beam_pitch_deg: float
     vignetting_power: float
@@ -110,13 +116,37 @@ class Photometry:
     def emission(self, d_cam: np.ndarray) -> np.ndarray:
         """Relative VCSEL intensity (...,) toward unit directions d_cam
         (..., 3) in the sensor's camera frame (x right, y down, z forward);
-        1 on the beam axis. The profile is elliptical: its angles from the
-        axis across (horizontal) and along (vertical) are scaled by their
-        own half widths."""
-        d = d_cam @ (geo.rot_y(self.beam_yaw_deg) @ geo.rot_x(self.beam_pitch_deg))  # into the beam's frame
-        ax = np.arctan2(d[..., 0], d[..., 2]) / np.deg2rad(self.beam_hwhm_deg[0])
-        ay = np.arctan2(d[..., 1], d[..., 2]) / np.deg2rad(self.beam_hwhm_deg[1])
-        return np.exp2(-((ax**2 + ay**2) ** self.beam_order))
+        1 on the beam axis: the flood plus the core."""
+        return self.flood(d_cam) + self.core(d_cam)
+
+    def flood(self, d_cam: np.ndarray) -> np.ndarray:
+        """The flood's share of `emission` (...,). Its profile is elliptical:
+        its angles from the axis across (horizontal) and along (vertical)
+        are scaled by their own half widths."""
+        ax, ay = self._beam_angles(d_cam)
+        r2 = (ax / np.deg2rad(self.beam_hwhm_deg[0])) ** 2 + (ay / np.deg2rad(self.beam_hwhm_deg[1])) ** 2
+        return (1.0 - self.core_share) * np.exp2(-(r2**self.beam_order))
+
+    def core(self, d_cam: np.ndarray) -> np.ndarray:
+        """The core's share of `emission` (...,)."""
+        ax, ay = self._beam_angles(d_cam)
+        return self.core_share * np.exp2(-(ax**2 + ay**2) / np.deg2rad(self.core_hwhm_deg) ** 2)
+
+    def core_spot(self) -> tuple[np.ndarray, float]:
+        """The core as one spot, for terms smooth over the lit wall: its
+        direction (3,) in the camera frame (the beam axis) and its power,
+        the core's intensity integrated over solid angle (sr)."""
+        axis = self._to_beam()[:, 2]
+        return axis, self.core_share * np.pi * np.deg2rad(self.core_hwhm_deg) ** 2 / np.log(2)
+
+    def _to_beam(self) -> np.ndarray:
+        """(3, 3): camera-frame row vectors times this are in the beam's frame."""
+        return geo.rot_y(self.beam_yaw_deg) @ geo.rot_x(self.beam_pitch_deg)
+
+    def _beam_angles(self, d_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Horizontal and vertical angles (rad) of d_cam from the beam axis."""
+        d = d_cam @ self._to_beam()
+        return np.arctan2(d[..., 0], d[..., 2]), np.arctan2(d[..., 1], d[..., 2])
 
     def response(self, d_cam: np.ndarray) -> np.ndarray:
         """Relative receive response (...,) to rays along d_cam (..., 3,
@@ -261,17 +291,31 @@ def transport(resolution: str, scatterers: list[Scatterer], phot: Photometry) ->
     return Transport(hist, ambient)
 
 
+def _lit_spots(phot: Photometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The flood-lit wall as spots for the diffuse three-bounce term: the
+    coarse grid carrying the flood, plus the core as one spot on the beam
+    axis (too narrow for the grid to sample). Returns points p (P, 3), their
+    distances from the sensor r_p (P,), m, and their shares of the beam
+    (P,): intensity times solid angle, sr."""
+    ls = laser_samples()
+    axis, power = phot.core_spot()
+    R, _ = geo.look_at(geo.SENSOR_POSITION, geo.SENSOR_FORWARD)
+    core = geo.intersect_plane(geo.SENSOR_POSITION, (axis @ R)[None], geo.WALL)
+    p = np.concatenate([ls.q.reshape(-1, 3), core])
+    share = np.append((phot.flood(ls.d_cam) * ls.omega).reshape(-1), power)
+    return p, np.linalg.norm(p - geo.SENSOR_POSITION, axis=-1), share
+
+
 def _add_diffuse(hist, zone, r_q, seen, g_oq, d_oq, sc: Scatterer, phot: Photometry) -> None:
     """Lambertian scatterer lit by the whole flood-lit wall: sum over laser spots p."""
-    ls = laser_samples()
-    p, r_p = ls.q.reshape(-1, 3), ls.r.reshape(-1)
+    p, r_p, share = _lit_spots(phot)
     d_po = sc.points[None, :, :] - p[:, None, :]  # (P, O, 3)
     dist_po = np.linalg.norm(d_po, axis=-1)
     cos_p = (d_po @ geo.WALL.normal) / dist_po
     cos_o = -np.einsum("pok,ok->po", d_po, sc.normals) / dist_po
     # L(p -> o) cos_p a_p / |p - o|^2 with a_p = omega_p r_p^2 / cos_p, L = rho_w/pi E_L(p)
     # and E_L(p) = I(p) cos_p / r_p^2: the spot's share of the beam is I(p) omega_p
-    e_o = (geo.WALL_ALBEDO / np.pi) * (phot.emission(ls.d_cam) * ls.omega).reshape(-1)[:, None] * np.clip(cos_p, 0, None)
+    e_o = (geo.WALL_ALBEDO / np.pi) * share[:, None] * np.clip(cos_p, 0, None)
     e_o = e_o * np.clip(cos_o, 0, None) / dist_po**2  # (P, O) irradiance at o from each p
     radiance_o = (sc.rho_diffuse / np.pi) * e_o
     w_oq = g_oq * seen[None, :]  # (O, Q)
