@@ -242,8 +242,9 @@ def test_the_diffuse_term_sees_the_whole_beam(phot):
     _, _, share = H._lit_spots(phot)
     fine = H._wall_samples(1, 64)
     assert share.sum() == pytest.approx((phot.emission(fine.d_cam) * fine.omega).sum(), rel=0.05)
-    _, power = phot.core_spot()
+    axis, power = phot.core_spot()
     assert power == pytest.approx((phot.core(fine.d_cam) * fine.omega).sum(), rel=0.02)
+    assert phot.core(axis) == pytest.approx(phot.core_share)  # the spot sits on the core's peak
 
 
 def test_zones_near_end_of_the_wall_is_brighter_like_the_real_sensor(zone_means):
