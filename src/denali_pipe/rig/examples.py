@@ -3,7 +3,7 @@
 For each (object set, NOOBJECT set) pair, three locations (nearest, middle,
 farthest from the wall) are shown for the centre zone, averaged over repeats:
 the zone the release's figures plot, and the one the beam's core lights (an
-8 in circle's bump there is 4-10x the one in the zone nearest the object,
+8 in circle's bump there is 3-10x the one in the zone nearest the object,
 docs/rig_zones.md). The difference is also shown smoothed. The shaded window
 is where geometry alone puts the object's retroreflective return:
 2|s - q| + 2|q - o| over the zone's wall samples q and the corners of the
