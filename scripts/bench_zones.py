@@ -23,13 +23,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from denali_pipe import geometry as geo
 from denali_pipe.objects import load_catalogue
 from denali_pipe.report.paper import REAL_ZONE_MEANS
 from denali_pipe.report.rig_vs_real import REAL_LOG_SPREAD, zone_pattern
 from denali_pipe.rig import histograms as H
 from denali_pipe.rig.measure import measure
-from denali_pipe.rig.scene import mount_scatterer, object_scatterer
+from denali_pipe.rig.scene import design_scene
 
 REPO = Path(__file__).resolve().parents[1]
 LOCATIONS = (5, 27, 45, 72, 94)
@@ -45,15 +44,12 @@ def main() -> None:
         phot = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
     catalogue = load_catalogue(REPO / "config" / "objects.tsv")
 
-    def scene(name, size, k):
-        return [mount_scatterer(geo.object_pose(k).t), object_scatterer(catalogue[name], size, geo.object_pose(k))]
-
     rng = np.random.default_rng(0)
     means, logs = [], []
     for k in LOCATIONS:
         for name in OBJECTS:
             for size in ("8inch", "4inch"):
-                light = H.transport("3x3", scene(name, size, k), phot)
+                light = H.transport("3x3", design_scene(catalogue[name], size, k), phot)
                 for on in (True, False):
                     expected = H.counts_from_transport("3x3", on, light, phot)
                     means.append(expected.mean(-1))
@@ -66,10 +62,10 @@ def main() -> None:
     print("   " + "; ".join(f"{key} {rig[key]:.2f} (real {ref[key]:.2f})" for key in rig))
     print(f"pooled log1p(counts): mean {np.mean(logs):.2f} (real 7.1), sd {np.std(logs):.2f} (real {REAL_LOG_SPREAD})")
 
-    mount = [mount_scatterer(geo.object_pose(MID).t)]
-    background = H.expected_counts("3x3", False, mount, phot)[1, 1]
+    square = design_scene(catalogue["square"], "8inch", MID)
+    background = H.expected_counts("3x3", False, square[:1], phot)[1, 1]
     b = measure(background, background)
-    expected = H.expected_counts("3x3", False, scene("square", "8inch", MID), phot)[1, 1]
+    expected = H.expected_counts("3x3", False, square, phot)[1, 1]
     capture = H.sample_counts(expected, phot, np.random.default_rng(1))
     c, e = measure(capture, background), measure(expected, background)
     print(f"(b) floor {100 * b.floor_fraction:.1f} % of the direct peak ({b.direct_peak:,.0f}); late / pre-peak floor {b.late_over_floor:.2f}")

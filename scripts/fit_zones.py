@@ -38,7 +38,7 @@ from denali_pipe.report.paper import REAL_ZONE_MEANS
 from denali_pipe.report.rig_vs_real import zone_pattern
 from denali_pipe.rig import histograms as H
 from denali_pipe.rig.measure import measure
-from denali_pipe.rig.scene import mount_scatterer, object_scatterer
+from denali_pipe.rig.scene import design_scene
 
 REPO = Path(__file__).resolve().parents[1]
 ZONE_SCALE = 0.07
@@ -93,22 +93,20 @@ def from_photometry(p: H.Photometry) -> np.ndarray:
 def measures(phot: H.Photometry, catalogue: dict) -> tuple[np.ndarray, dict]:
     """The zone means (3, 3) and the centre-zone checks, by CHECKS' names."""
 
-    def scene(name, k):
-        return [mount_scatterer(geo.object_pose(k).t), object_scatterer(catalogue[name], "8inch", geo.object_pose(k))]
-
     rng = np.random.default_rng(0)
     means, logs = [], []
     for k in (5, 45, 94):
         for name in ("A", "square"):
-            light = H.transport("3x3", scene(name, k), phot)
+            light = H.transport("3x3", design_scene(catalogue[name], "8inch", k), phot)
             for on in (True, False):
                 expected = H.counts_from_transport("3x3", on, light, phot)
                 means.append(expected.mean(-1))
                 logs.append(np.log1p(H.sample_counts(expected, phot, rng)))
-    background = H.expected_counts("3x3", False, scene("square", 45)[:1], phot)[1, 1]
+    square = design_scene(catalogue["square"], "8inch", 45)
+    background = H.expected_counts("3x3", False, square[:1], phot)[1, 1]
     b = measure(background, background)
-    c = measure(H.expected_counts("3x3", False, scene("square", 45), phot)[1, 1], background)
-    eight = [mount_scatterer(geo.object_pose(90).t), object_scatterer(catalogue["8"], "8inch", geo.object_pose(90))]
+    c = measure(H.expected_counts("3x3", False, square, phot)[1, 1], background)
+    eight = design_scene(catalogue["8"], "8inch", 90)
     width = measure(H.expected_counts("3x3", False, eight, phot)[1, 1], H.expected_counts("3x3", False, eight[:1], phot)[1, 1]).bump_fwhm
     values = (b.floor_fraction, b.late_over_floor, c.bump_fraction, c.bump_over_floor, width, np.mean(logs), np.std(logs))
     return np.mean(means, 0), dict(zip([name for name, *_ in CHECKS], values))

@@ -109,3 +109,8 @@ def test_select_locations():
 def test_time_axis():
     assert geo.BIN_WIDTH_OPL * geo.N_BINS == pytest.approx(3.0)
     assert geo.opl_to_bin(geo.HIST_START_OPL + 10 * geo.BIN_WIDTH_OPL) == pytest.approx(10)
+
+
+def test_centre_zone_is_the_middle_of_the_grid():
+    assert geo.centre_zone("3x3") == (1, 1)
+    assert geo.centre_zone("8x8") == (4, 4)  # the lower right of the middle four

@@ -10,7 +10,7 @@ from denali_pipe.meshes import front_samples, object_mesh, sample_spacing
 from denali_pipe.report import paper
 from denali_pipe.rig import histograms as H
 from denali_pipe.rig.measure import measure
-from denali_pipe.rig.scene import mount_scatterer, object_scatterer
+from denali_pipe.rig.scene import design_scene, mount_scatterer, object_scatterer
 
 
 @pytest.fixture(scope="module")
@@ -106,7 +106,7 @@ MID = 45
 @pytest.fixture(scope="module")
 def mid_scene(catalogue):
     def scene(name, size, k=MID):
-        return [mount_scatterer(geo.object_pose(k).t), object_scatterer(catalogue[name], size, geo.object_pose(k))]
+        return design_scene(catalogue[name], size, k)
 
     return scene
 

@@ -313,6 +313,14 @@ SENSOR_FOV_DEG = (52.0, 41.0)
 RESOLUTIONS = {"3x3": 3, "8x8": 8}
 
 
+def centre_zone(resolution: str) -> tuple[int, int]:
+    """(row, column) of the zone at the middle of the grid: the 3x3 centre
+    zone, which the release's figures plot and the beam's core lights (for
+    8x8, the lower right of the middle four)."""
+    n = RESOLUTIONS[resolution]
+    return n // 2, n // 2
+
+
 def zone_edges(n: int) -> tuple[np.ndarray, np.ndarray]:
     """Tangent-plane edges (horizontal, vertical), each (n + 1,), of the n x n
     zones in the captures' order, in the sensor's camera frame (x right, y

@@ -29,7 +29,7 @@ from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.report.paper import REAL_CENTRE_ZONE, REAL_ZONE_MEANS
 from denali_pipe.rig.measure import measure
 
-CENTRE_ZONE = (1, 1)
+CENTRE_ZONE = geo.centre_zone("3x3")
 # The panels show counts up to this fraction of the direct peak: the bump lives there.
 ZOOM = 0.25
 COLUMNS = (

@@ -34,12 +34,6 @@ def plate_corners(size: str, location: int) -> np.ndarray:
     return geo.object_pose(location).apply(local)
 
 
-def centre_zone(resolution: str) -> tuple[int, int]:
-    """The zone at the middle of the grid (for 8x8, the lower right of the middle four)."""
-    n = geo.RESOLUTIONS[resolution]
-    return n // 2, n // 2
-
-
 def bump_window(resolution: str, size: str, location: int, zone: tuple[int, int]) -> tuple[float, float]:
     """First and last bin (fractional) of the predicted three-bounce return."""
     ws = wall_samples(resolution)
@@ -64,7 +58,7 @@ def rig_examples(pairs: list[tuple[Path, Path]], out_png: Path) -> None:
         dist = geo.wall_distance(np.array([geo.object_pose(k).t for k in locations]))
         picks = [locations[i] for i in (int(dist.argmin()), int(np.argsort(dist)[len(dist) // 2]), int(dist.argmax()))]
         for ax, k in zip(ax_row, picks):
-            zone = centre_zone(cs.resolution)
+            zone = geo.centre_zone(cs.resolution)
             obj = obj_store.histogram(obj_store.index_of(k)).mean(0)[zone]
             bg = bg_store.histogram(bg_store.index_of(k)).mean(0)[zone]
             lo, hi = bump_window(cs.resolution, cs.size, k, zone)

@@ -42,3 +42,11 @@ def mount_scatterer(mount_point: np.ndarray) -> Scatterer:
     normals = np.tile(-geo.WALL.normal, (len(points), 1))
     area = np.full(len(points), (w / len(xs)) * MOUNT_SPACING)
     return Scatterer(points, normals, area, geo.MOUNT_POST_ALBEDO, 0.0)
+
+
+def design_scene(spec: ObjectSpec, size: str, location: int) -> list[Scatterer]:
+    """The mount and the object at gantry `location`'s design pose, no
+    nuisances (benchmarks and physics tests); the mount alone, element 0,
+    is that location's background."""
+    pose = geo.object_pose(location)
+    return [mount_scatterer(pose.t), object_scatterer(spec, size, pose)]
