@@ -5,8 +5,8 @@
 
 
 from denali_pipe.cli import warm_start
-from denali_pipe.scheduler_timer import keep_one_reevaluation_timer
-from denali_pipe.targets import target_files
+from denali_pipe.workflow.scheduler_timer import keep_one_reevaluation_timer
+from denali_pipe.workflow.targets import target_files
 
 # Snakemake's scheduler starts a timer chain per finished job and its main
 # process ends up scheduling on a quarter of a 2-core machine (the module says why).

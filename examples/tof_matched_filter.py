@@ -17,7 +17,7 @@ features:
 A small MLP maps the features of every zone and filter to the outputs. Only
 the MLP learns (about 10k parameters for 3x3 zones).
 
-Factory contract (denali_pipe.registry): factory(task, n_outputs,
+Factory contract (denali_pipe.train.registry): factory(task, n_outputs,
 input_shape (n, n, T)) -> nn.Module taking (B, n, n, T) and giving
 (B, n_outputs).
 """

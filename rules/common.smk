@@ -11,15 +11,15 @@ from pathlib import Path
 
 import pandas as pd
 
-from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
-from denali_pipe.cells import LINEAR, SPLITS, TASKS, is_ill_posed, uses_gpu
-from denali_pipe.costs import combine, cost_model, frame_pixels, gpu_speedup, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
-from denali_pipe.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
+from denali_pipe.train.cells import LINEAR, SPLITS, TASKS, is_ill_posed, uses_gpu
+from denali_pipe.workflow.costs import combine, cost_model, frame_pixels, gpu_speedup, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
+from denali_pipe.train.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.experiments.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
-from denali_pipe.geometry import N_BINS, N_LOCATIONS, RESOLUTIONS, select_locations
+from denali_pipe.core.geometry import N_BINS, N_LOCATIONS, RESOLUTIONS, select_locations
 from denali_pipe.io.tree import survey_tree
-from denali_pipe.objects import BACKGROUNDS, VARIANTS, load_catalogue
-from denali_pipe.registry import check_left_out, check_models
+from denali_pipe.core.objects import BACKGROUNDS, VARIANTS, load_catalogue
+from denali_pipe.train.registry import check_left_out, check_models
 from denali_pipe.twin.illumination import check_renderer
 
 min_version("9.0")
@@ -370,7 +370,7 @@ FRAME_PIXELS = frame_pixels(config["rig"]["frames"] if config["source"] == "synt
 
 
 def capture_set_work(name):
-    """One capture set's work terms (denali_pipe.costs) at this config's scale
+    """One capture set's work terms (denali_pipe.workflow.costs) at this config's scale
     (rig.repeats histograms a location: a release holds 3, as the rig's default)."""
     resolution = parse_set_name(name).resolution
     return set_work(len(planned_locations()), config["rig"]["repeats"], resolution, *FRAME_PIXELS)

@@ -29,8 +29,8 @@ import pandas as pd
 import torch
 import yaml
 
-from denali_pipe.cells import TASKS, Cell
-from denali_pipe.train import Hyper, cpu_has_amx, run_cell, training_device, training_precision
+from denali_pipe.train.cells import TASKS, Cell
+from denali_pipe.train.training import Hyper, cpu_has_amx, run_cell, training_device, training_precision
 
 REPO = Path(__file__).resolve().parents[1]
 SHAPES, SIZES, LIGHTS, LOCATIONS, REPEATS = 30, ("4inch", "8inch"), ("on", "off"), 100, 3

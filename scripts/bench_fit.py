@@ -33,9 +33,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from denali_pipe.capture_sets import parse_set_name
-from denali_pipe.objects import load_catalogue
-from denali_pipe.transforms import SCALARS, build_pairs, check_fit, fit_transforms, split_pairs
+from denali_pipe.core.capture_sets import parse_set_name
+from denali_pipe.core.objects import load_catalogue
+from denali_pipe.transforms.sim_to_real import SCALARS, build_pairs, check_fit, fit_transforms, split_pairs
 
 REPO = Path(__file__).resolve().parents[1]
 SNRS = (0.25, 0.5, 1, 2, 3, 5, 10, 20, 50)

@@ -43,8 +43,8 @@ SET = "A_8inch_3x3_lighton"
 CHILD = """
 import resource, sys
 from pathlib import Path
-from denali_pipe.ingest import ingest_set
-from denali_pipe.objects import load_catalogue
+from denali_pipe.ingest.capture_set import ingest_set
+from denali_pipe.core.objects import load_catalogue
 spec = load_catalogue(Path(sys.argv[1]))["A"]
 if sys.argv[2] != "-":
     ingest_set(Path(sys.argv[2]), Path(sys.argv[3]), spec)
@@ -68,8 +68,8 @@ def timed(fn, repeat: int = 3) -> float:
 
 
 def synth(tmp: Path, n_locations: int, scale: float):
-    from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
-    from denali_pipe.objects import load_catalogue
+    from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
+    from denali_pipe.core.objects import load_catalogue
     from denali_pipe.rig.capture import synth_sets
 
     with open(REPO / "config" / "config.yaml") as f:
@@ -117,7 +117,7 @@ def main() -> None:
     ap.add_argument("--scale", type=float, default=0.5)
     args = ap.parse_args()
 
-    from denali_pipe.ingest import check_histogram, ingest_pickle, ingest_release
+    from denali_pipe.ingest.capture_set import check_histogram, ingest_pickle, ingest_release
     from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR
     from denali_pipe.io.store import StoreWriter, open_set
 

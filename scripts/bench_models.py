@@ -37,8 +37,8 @@ import time
 import torch
 from torch import nn
 
-from denali_pipe.models import PAPER_MODELS, n_params
-from denali_pipe.registry import n_outputs
+from denali_pipe.train.models import PAPER_MODELS, n_params
+from denali_pipe.train.registry import n_outputs
 
 N = 3  # zones per side
 BINS = (128, 56)  # full histograms; cropped after the first bounce

@@ -37,7 +37,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.poses.calibrate import calibrate
 from denali_pipe.poses.detect import TagDetector, quad_centre
 from denali_pipe.poses.estimate import EXPECTED_TAG_IDS, estimate_frames, observe_frame

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from denali_pipe import geometry as geo
-from denali_pipe.objects import load_catalogue
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.objects import load_catalogue
 from denali_pipe.rig import histograms as H
 from denali_pipe.rig.measure import matched_filter_snr
 from denali_pipe.rig.scene import mount_scatterer, object_scatterer

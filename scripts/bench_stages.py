@@ -14,7 +14,7 @@ benchmarks/, results/, data/raw/) and, per stage (rule):
 - prints CPU seconds per job, captures (or training samples) per CPU-second,
   MB read and written per CPU-second and peak memory at each run's scale;
 - fits a per-job cost model, CPU seconds and peak MB linear in the job's work
-  (`denali_pipe.costs`: histogram values, frame pixels, training samples),
+  (`denali_pipe.workflow.costs`: histogram values, frame pixels, training samples),
   on every run given; `--coarse` names runs made by plain `snakemake`, whose
   CPU times are extrapolated (see `full_cpu`);
 - with `--check RUN`: fits on the other runs and compares RUN's measured
@@ -53,10 +53,10 @@ import pyarrow.parquet as pq
 import yaml
 from scipy.optimize import nnls
 
-from denali_pipe import costs
-from denali_pipe.capture_sets import FOLDER_SUFFIX, parse_set_name
-from denali_pipe.cells import uses_gpu
 from denali_pipe.cli import warm_start
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX, parse_set_name
+from denali_pipe.train.cells import uses_gpu
+from denali_pipe.workflow import costs
 
 REPO = Path(__file__).resolve().parents[1]
 WORKFLOW_FILES = ("Snakefile", "rules", "config", "profiles", "envs", "report", "examples")
@@ -515,7 +515,7 @@ def print_projection(fitted: dict, jobs: pd.DataFrame, args: argparse.Namespace)
 
 
 def write_cost_table(path: Path, fitted: dict, runs: list[str]) -> None:
-    """The cost table the rules' SLURM requests come from (denali_pipe.costs)."""
+    """The cost table the rules' SLURM requests come from (denali_pipe.workflow.costs)."""
 
     def rounded(m):
         return {k: rounded(v) if isinstance(v, dict) else float(f"{v:.4g}") for k, v in m.items()}
@@ -524,7 +524,7 @@ def write_cost_table(path: Path, fitted: dict, runs: list[str]) -> None:
     rules["train"] = rounded(fitted["train"])
     header = (
         "# Per-job cost models (CPU seconds, peak RSS in MB) linear in each job's work\n"
-        "# (src/denali_pipe/costs.py), fitted on the runs below by\n"
+        "# (src/denali_pipe/workflow/costs.py), fitted on the runs below by\n"
         f"#   python scripts/bench_stages.py fit ... --write-costs {path}\n"
         "# (docs/performance.md: the runs, their machine, the fit's check). Regenerate, do not edit.\n"
     )

@@ -27,10 +27,10 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from denali_pipe.capture_sets import select_objects
-from denali_pipe.geometry import select_locations
-from denali_pipe.meshes import object_mesh
-from denali_pipe.objects import load_catalogue
+from denali_pipe.core.capture_sets import select_objects
+from denali_pipe.core.geometry import select_locations
+from denali_pipe.core.meshes import object_mesh
+from denali_pipe.core.objects import load_catalogue
 from denali_pipe.twin.benchmark import benchmark_scenes, nl2, run_benchmark
 from denali_pipe.twin.layout import load_calibration, nominal_scene, twin_scene, zone_footprint
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from denali_pipe.objects import load_catalogue
+from denali_pipe.core.objects import load_catalogue
 from denali_pipe.report.paper import REAL_ZONE_MEANS
 from denali_pipe.report.rig_vs_real import REAL_LOG_SPREAD, zone_pattern
 from denali_pipe.rig import histograms as H

@@ -35,12 +35,12 @@ import pandas as pd
 import torch
 import yaml
 
-from denali_pipe.capture_sets import parse_set_name
-from denali_pipe.dataset import location_labels
+from denali_pipe.core.capture_sets import parse_set_name
 from denali_pipe.experiments import fig9
-from denali_pipe.metrics import predict_mean_baseline, regression_metrics
-from denali_pipe.train import Hyper
-from denali_pipe.transforms import build_pairs, read_transforms, split_pairs
+from denali_pipe.train.dataset import location_labels
+from denali_pipe.train.metrics import predict_mean_baseline, regression_metrics
+from denali_pipe.train.training import Hyper
+from denali_pipe.transforms.sim_to_real import build_pairs, read_transforms, split_pairs
 
 SEED = 42  # the model's and the noise draws' seed (Fig 9's first)
 

@@ -32,8 +32,8 @@ import numpy as np
 import yaml
 from scipy.optimize import least_squares
 
-from denali_pipe import geometry as geo
-from denali_pipe.objects import load_catalogue
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.objects import load_catalogue
 from denali_pipe.report.paper import REAL_ZONE_MEANS
 from denali_pipe.report.rig_vs_real import zone_pattern
 from denali_pipe.rig import histograms as H

@@ -5,7 +5,7 @@
     python scripts/make_readme_figure.py --out fig.png
 
 Left: the scene in the world frame (metres, top view), drawn from
-`denali_pipe.geometry` (the one source of the rig's geometry): the relay
+`denali_pipe.core.geometry` (the one source of the rig's geometry): the relay
 wall, the two tables, the 10 x 10 gantry grid, the LiDAR and its laser spot on
 the wall, a hidden object at one gantry location, the three-bounce path
 (laser spot -> object -> wall -> sensor) and the tracking camera's direction.
@@ -25,7 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import FancyArrowPatch, FancyBboxPatch, Rectangle  # noqa: E402
 
-from denali_pipe import geometry as geo  # noqa: E402
+from denali_pipe.core import geometry as geo  # noqa: E402
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "img" / "pipeline.png"
 # A gantry location near the middle of the grid, to show one object position.

@@ -10,7 +10,7 @@ ASSETS = REPO.parent / "shared" / "denali-assets"
 @pytest.fixture(scope="session")
 def catalogue():
     """The objects sheet's specs ({name: ObjectSpec}, frozen)."""
-    from denali_pipe.objects import load_catalogue
+    from denali_pipe.core.objects import load_catalogue
 
     return load_catalogue(REPO / "config" / "objects.tsv")
 

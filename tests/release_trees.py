@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from denali_pipe.capture_sets import FOLDER_SUFFIX
-from denali_pipe.geometry import N_LOCATIONS
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX
+from denali_pipe.core.geometry import N_LOCATIONS
 
 
 def write_set(raw: Path, name: str, locations=range(N_LOCATIONS), frames=None, folder=None) -> Path:

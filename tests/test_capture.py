@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from conftest import ASSETS, REPO
 
-from denali_pipe import geometry as geo
-from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
-from denali_pipe.objects import load_catalogue
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
+from denali_pipe.core.objects import load_catalogue
 from denali_pipe.rig import capture
 
 N_LOCATIONS = 3

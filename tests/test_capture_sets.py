@@ -8,7 +8,7 @@ from collections import Counter
 import pytest
 from conftest import REPO
 
-from denali_pipe.capture_sets import (
+from denali_pipe.core.capture_sets import (
     FOLDER_SUFFIX,
     LIGHTINGS,
     PICKLE_SUFFIX,
@@ -19,7 +19,7 @@ from denali_pipe.capture_sets import (
     select_objects,
     select_sets,
 )
-from denali_pipe.objects import BACKGROUNDS
+from denali_pipe.core.objects import BACKGROUNDS
 
 # --- parse_set_name ------------------------------------------------------------------
 

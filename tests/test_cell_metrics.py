@@ -5,8 +5,8 @@ import json
 
 import pytest
 
-from denali_pipe.cell_metrics import CellMetrics
-from denali_pipe.cells import Cell
+from denali_pipe.train.cell_metrics import CellMetrics
+from denali_pipe.train.cells import Cell
 
 CELL = Cell(model="cnn1d", task="shape", split="random", resolution="3x3", protocol="clean", seed=42)
 SCORES = {"top1": 0.5, "top5": 0.9, "precision": 0.4, "recall": 0.5, "f1": 0.45}

@@ -9,9 +9,9 @@ import logging
 import numpy as np
 import pytest
 
-from denali_pipe import geometry as geo
-from denali_pipe.capture_sets import parse_set_name
 from denali_pipe.cli import main
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.capture_sets import parse_set_name
 from denali_pipe.rig.capture import synth_sets
 
 N_LOCATIONS = 2

@@ -10,9 +10,9 @@ import yaml
 from conftest import REPO
 from release_trees import write_set, write_tree
 
-from denali_pipe.capture_sets import expected_sets
 from denali_pipe.cli import main
-from denali_pipe.workflow_config import load_config
+from denali_pipe.core.capture_sets import expected_sets
+from denali_pipe.workflow.config import load_config
 
 TINY = "config/presets/tiny.yaml"
 

@@ -14,9 +14,9 @@ import pandas as pd
 import pytest
 import torch
 
-from denali_pipe import geometry as geo
 from denali_pipe.cli import warm_start
-from denali_pipe.dataset import write_dataset
+from denali_pipe.core import geometry as geo
+from denali_pipe.train.dataset import write_dataset
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="warm start is Linux only")
 
@@ -172,7 +172,7 @@ def test_a_training_cell_run_warm_writes_what_it_writes_afresh(tmp_path):
     cell = {"model": "cnn1d", "task": "location", "split": "random", "resolution": "3x3", "condition": "all", "protocol": "clean", "seed": 42}
     hyper = {"lr": 1e-3, "epochs": 2, "batch_size": 16, "norm": "raw"}
     argv = ["train", "3x3.zarr", "--table", "3x3.parquet", "--cell", json.dumps(cell), "--hyper", json.dumps(hyper)]
-    argv += ["--factory", "denali_pipe.models:cnn1d", "--validation-fraction", "0.2", "--threads", "1"]
+    argv += ["--factory", "denali_pipe.train.models:cnn1d", "--validation-fraction", "0.2", "--threads", "1"]
 
     socket_path = tmp_path / "socket"
     server = start_server(socket_path, [sys.executable, "-m", "denali_pipe.cli.warm_start"])

@@ -8,11 +8,22 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from denali_pipe import geometry as geo
 from denali_pipe.cli import main
-from denali_pipe.conditions import ALL, ATTRIBUTES, CONDITION_GROUPS, GROUP_OF, PATTERN, TABLES, condition_mask, condition_view, ill_posed, table_conditions
-from denali_pipe.dataset import write_dataset
+from denali_pipe.core import geometry as geo
 from denali_pipe.experiments.jitter import centre_zone, jitter
+from denali_pipe.train.conditions import (
+    ALL,
+    ATTRIBUTES,
+    CONDITION_GROUPS,
+    GROUP_OF,
+    PATTERN,
+    TABLES,
+    condition_mask,
+    condition_view,
+    ill_posed,
+    table_conditions,
+)
+from denali_pipe.train.dataset import write_dataset
 
 OBJECTS = {"1": ("1", "number"), "7": ("7", "number"), "A": ("A", "letter"), "circle": ("circle", "shape")}
 
@@ -116,7 +127,7 @@ def test_denali_train_trains_and_tests_within_the_condition(tmp_path, samples, c
             "--hyper",
             hyper,
             "--factory",
-            "denali_pipe.models:cnn1d",
+            "denali_pipe.train.models:cnn1d",
         ]
         return main([*args, "--validation-fraction", "0.2", "--outdir", str(out)]), out
 

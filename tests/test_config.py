@@ -14,8 +14,8 @@ import yaml
 from conftest import REPO
 from snakemake.utils import update_config, validate
 
-from denali_pipe.capture_sets import expected_sets
-from denali_pipe.objects import BACKGROUNDS, load_catalogue
+from denali_pipe.core.capture_sets import expected_sets
+from denali_pipe.core.objects import BACKGROUNDS, load_catalogue
 
 SCHEMA = str(REPO / "config" / "schema.yaml")
 HYPER = {"lr": 1e-3, "epochs": 1, "batch_size": 8, "norm": "raw"}

@@ -3,7 +3,7 @@ from pathlib import Path
 import pytest
 from conftest import REPO
 
-from denali_pipe import costs
+from denali_pipe.workflow import costs
 
 REQUESTS = {"runtime_headroom": 3, "mem_headroom": 2, "min_runtime_min": 10, "min_mem_mb": 1000}
 

@@ -4,10 +4,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from denali_pipe.capture_sets import parse_set_name
-from denali_pipe.dataset import build_dataset, location_labels, read_dataset, write_dataset
+from denali_pipe.core.capture_sets import parse_set_name
 from denali_pipe.io.features import read_features, write_features
-from denali_pipe.preprocess import Features
+from denali_pipe.preprocess.histograms import Features
+from denali_pipe.train.dataset import build_dataset, location_labels, read_dataset, write_dataset
 
 
 def _features(seed, locations=(0, 5, 9), crop=77, bins=51):

@@ -7,9 +7,9 @@ import torch
 from test_train import _cell, data, factory  # noqa: F401 (the fixture)
 
 from denali_pipe.cli import main
-from denali_pipe.dataset import write_dataset
-from denali_pipe.evaluate import Evaluation, baseline_score, embed, labels, load_cell, predict, score
-from denali_pipe.train import Hyper, partition, run_cell, targets
+from denali_pipe.train.dataset import write_dataset
+from denali_pipe.train.evaluate import Evaluation, baseline_score, embed, labels, load_cell, predict, score
+from denali_pipe.train.training import Hyper, partition, run_cell, targets
 
 HP = Hyper(lr=3e-3, epochs=2, batch_size=32, norm="log_z")
 

@@ -7,8 +7,8 @@ import yaml
 from conftest import REPO
 from test_train import _cell, data  # noqa: F401 (the fixture)
 
-from denali_pipe.registry import build, check_models
-from denali_pipe.train import Hyper, run_cell
+from denali_pipe.train.registry import build, check_models
+from denali_pipe.train.training import Hyper, run_cell
 
 EXAMPLE = yaml.safe_load((REPO / "examples" / "tof.yaml").read_text())["train"]
 

@@ -12,16 +12,16 @@ import torch
 from browser import chromium, ensure_chromium, explorer, wait_for
 from test_train import _cell, data  # noqa: F401 (the fixture)
 
-from denali_pipe.capture_sets import CaptureSet
-from denali_pipe.dataset import write_dataset
+from denali_pipe.core.capture_sets import CaptureSet
+from denali_pipe.core.geometry import N_LOCATIONS, gantry_row_col
 from denali_pipe.explore.app import pick_choice, pick_set
 from denali_pipe.explore.capture import Calibration, gantry_grid
 from denali_pipe.explore.figures import histogram_grid, title
 from denali_pipe.explore.outputs import CellChoice, scan
 from denali_pipe.explore.predictions import error_by_location
-from denali_pipe.geometry import N_LOCATIONS, gantry_row_col
 from denali_pipe.poses.pnp import project
-from denali_pipe.train import Hyper, run_cell
+from denali_pipe.train.dataset import write_dataset
+from denali_pipe.train.training import Hyper, run_cell
 
 
 def test_an_empty_results_folder_names_what_builds_each_output(tmp_path):
@@ -91,7 +91,7 @@ def test_the_per_location_test_error_recombines_to_the_cells_test_metric(tmp_pat
     write_dataset(x, samples, results / "datasets/3x3.zarr", results / "datasets/3x3.parquet", crop_start=0)
     cell = _cell(task=task)
     result = run_cell(
-        x, samples, cell, Hyper(lr=3e-3, epochs=2, batch_size=32, norm="raw"), validation_fraction=0.2, factory=f"denali_pipe.models:{cell.model}"
+        x, samples, cell, Hyper(lr=3e-3, epochs=2, batch_size=32, norm="raw"), validation_fraction=0.2, factory=f"denali_pipe.train.models:{cell.model}"
     )
     choice = CellChoice(cell.protocol, cell.resolution, cell.split, cell.model, cell.seed)
     run = results / choice.run_path(task)

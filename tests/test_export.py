@@ -8,16 +8,16 @@ from conftest import REPO
 from test_train import _cell, data  # noqa: F401 (the fixture)
 
 from denali_pipe.cli import main
-from denali_pipe.evaluate import load_cell, predict
-from denali_pipe.export import load_export
-from denali_pipe.preprocess import CropWindow
-from denali_pipe.train import Hyper, run_cell
+from denali_pipe.preprocess.histograms import CropWindow
+from denali_pipe.train.evaluate import load_cell, predict
+from denali_pipe.train.export import load_export
+from denali_pipe.train.training import Hyper, run_cell
 
 CASES = [
-    ("cnn1d", "shape", "log_z", "denali_pipe.models:cnn1d"),
-    ("mlp", "location", "raw", "denali_pipe.models:mlp"),
-    ("cnn3d", "size", "log_z", "denali_pipe.models:cnn3d"),
-    ("transformer", "shape", "log_z", "denali_pipe.models:transformer"),
+    ("cnn1d", "shape", "log_z", "denali_pipe.train.models:cnn1d"),
+    ("mlp", "location", "raw", "denali_pipe.train.models:mlp"),
+    ("cnn3d", "size", "log_z", "denali_pipe.train.models:cnn3d"),
+    ("transformer", "shape", "log_z", "denali_pipe.train.models:transformer"),
     ("tof", "location", "raw", "examples.tof_matched_filter:tof_matched_filter"),
 ]
 

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.poses import estimate_frames, filter_estimates
 from denali_pipe.report.fig12 import CSV_COLUMNS, annotate_frame, write_fig12
 from denali_pipe.rig.frames import frame_tags, render_frame

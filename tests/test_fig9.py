@@ -9,11 +9,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE, PANELS, bound_to_workspace, control_hyper, real_samples, run_fig9
 from denali_pipe.report.fig9 import NEVER, samples_for, write_fig9
-from denali_pipe.train import Hyper
-from denali_pipe.transforms import FIDELITIES, KERNEL_BINS, ZONES, Pairs, Transforms, ZoneTransforms, split_pairs
+from denali_pipe.train.training import Hyper
+from denali_pipe.transforms.sim_to_real import FIDELITIES, KERNEL_BINS, ZONES, Pairs, Transforms, ZoneTransforms, split_pairs
 
 CROP, T, R = 77, 51, 3
 N_CAPTURES = 30

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from denali_pipe import geometry as g
+from denali_pipe.core import geometry as g
 from denali_pipe.rig.frames import frame_tags, render_frame, tag_texture
 
 pyapriltags = pytest.importorskip("pyapriltags")

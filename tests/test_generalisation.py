@@ -5,10 +5,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from denali_pipe.cell_metrics import CellMetrics
-from denali_pipe.cells import Cell
-from denali_pipe.evaluate import Evaluation
 from denali_pipe.experiments.generalisation import ANY_DATA, BASE_TEST, CHANCE, MEAN_BASELINE, MODEL, NONRR, RR, fig10, fig11, histogram_table, score_table
+from denali_pipe.train.cell_metrics import CellMetrics
+from denali_pipe.train.cells import Cell
+from denali_pipe.train.evaluate import Evaluation
 
 NONRR_DATA = "results/datasets/nonrr_3x3.zarr"
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from conftest import ASSETS
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 
 # tag1_positions.json (the release's labels) sits at a constant offset from the
 # tag-1 centres that poses.json and the digital twin use (REFERENCE Part 1 §7.1).

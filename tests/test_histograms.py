@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from denali_pipe import geometry as geo
-from denali_pipe.meshes import front_samples, object_mesh, sample_spacing
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.meshes import front_samples, object_mesh, sample_spacing
 from denali_pipe.report import paper
 from denali_pipe.rig import histograms as H
 from denali_pipe.rig.measure import measure

@@ -18,9 +18,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from denali_pipe import geometry as geo
-from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
-from denali_pipe.ingest import INDEX_COLUMNS, ingest_pickle, ingest_release, ingest_set
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
+from denali_pipe.ingest.capture_set import INDEX_COLUMNS, ingest_pickle, ingest_release, ingest_set
 from denali_pipe.io.pickle_stream import UnsafePickleError
 from denali_pipe.io.release import FRAME_DIRS, location_span
 from denali_pipe.io.store import open_set

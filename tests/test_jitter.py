@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 from scipy.stats import norm
 
+from denali_pipe.core.geometry import BIN_WIDTH_PS
 from denali_pipe.experiments.jitter import FWHM_PER_SIGMA, centre_zone, jitter, jitter_condition, jitter_curve, jitter_fwhm, jitter_kernel
-from denali_pipe.geometry import BIN_WIDTH_PS
 
 
 def test_bin_width_is_the_time_axis_of_3_128_m_optical_path():

@@ -11,8 +11,8 @@ from conftest import REPO
 from shapely import affinity
 from test_objects import write_sheet
 
-from denali_pipe import meshes as M
-from denali_pipe import objects as O
+from denali_pipe.core import meshes as M
+from denali_pipe.core import objects as O
 
 REAL = (REPO / "../shared/denali-assets/objects").resolve()
 needs_real = pytest.mark.skipif(not REAL.is_dir(), reason=f"no release meshes at {REAL}")

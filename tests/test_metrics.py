@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from sklearn.metrics import accuracy_score, precision_recall_fscore_support, top_k_accuracy_score
 
-from denali_pipe.metrics import (
+from denali_pipe.train.metrics import (
     classification_metrics,
     predict_majority_baseline,
     predict_mean_baseline,

@@ -4,9 +4,9 @@ import pytest
 import torch
 from torch import nn
 
-from denali_pipe.cells import TASKS
-from denali_pipe.models import PAPER_MODELS, cnn1d, forward_flops, n_params, transformer
-from denali_pipe.registry import n_outputs
+from denali_pipe.train.cells import TASKS
+from denali_pipe.train.models import PAPER_MODELS, cnn1d, forward_flops, n_params, transformer
+from denali_pipe.train.registry import n_outputs
 
 # Table 10 of the paper for 3x3x128 input, as rebuilt in REFERENCE Part 2 §2. The one
 # exception is the Transformer size model: the reference builds it as a classifier,

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.rig import nuisances as N
 from denali_pipe.rig.frames import frame_tags
 

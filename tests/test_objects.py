@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from denali_pipe import objects as O
+from denali_pipe.core import objects as O
 
 HEADER = "\t".join(O.COLUMNS)
 

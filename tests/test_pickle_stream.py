@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 from conftest import REPO
 
-from denali_pipe.capture_sets import PICKLE_SUFFIX, parse_set_name
+from denali_pipe.core.capture_sets import PICKLE_SUFFIX, parse_set_name
+from denali_pipe.core.objects import load_catalogue
 from denali_pipe.io.pickle_stream import (
     ALLOWED_GLOBALS,
     RECORD_KEYS,
@@ -26,7 +27,6 @@ from denali_pipe.io.pickle_stream import (
     read_metadata,
     restricted_loads,
 )
-from denali_pipe.objects import load_catalogue
 from denali_pipe.rig import capture
 
 SET = "A_8inch_3x3_lighton"

@@ -20,10 +20,10 @@ import pytest
 import yaml
 from conftest import ASSETS, REPO
 
-from denali_pipe import geometry as geo
-from denali_pipe.capture_sets import FOLDER_SUFFIX, parse_set_name
-from denali_pipe.ingest import ingest_set
-from denali_pipe.objects import load_catalogue
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX, parse_set_name
+from denali_pipe.core.objects import load_catalogue
+from denali_pipe.ingest.capture_set import ingest_set
 from denali_pipe.poses import COLUMNS, calibrate, detect_set, estimate_frames
 from denali_pipe.poses.estimate import EXPECTED_TAG_IDS, check_object_coverage
 from denali_pipe.report.table6 import table6

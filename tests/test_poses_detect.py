@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.poses.detect import TagDetector, quad_centre, refine_corners, tag_bits, to_grey
 from denali_pipe.rig.frames import frame_tags, render_frame
 

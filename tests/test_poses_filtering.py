@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.poses.filtering import MIN_FILTER_N, filter_estimates, summarise, zscore_keep
 
 N = 12_000

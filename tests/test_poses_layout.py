@@ -7,8 +7,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from denali_pipe import geometry as geo
-from denali_pipe.geometry import Pose, rot_x, rot_y, rot_z
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.geometry import Pose, rot_x, rot_y, rot_z
 from denali_pipe.poses.layout import GROUPS, solve_layout
 
 CAM = geo.TRACKING_CAMERA.scaled(0.5)

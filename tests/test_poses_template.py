@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.poses.detect import TagDetector, to_grey
 from denali_pipe.poses.template import fit_template, render_model
 from denali_pipe.rig.frames import frame_tags, render_frame

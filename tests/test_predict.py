@@ -11,10 +11,10 @@ import pytest
 import torch
 
 from denali_pipe.cli import main
-from denali_pipe.evaluate import load_cell, predict
-from denali_pipe.predict import capture_features, predict_capture, read_background, read_capture, softmax
-from denali_pipe.preprocess import background_means, crop_window, preprocess
-from denali_pipe.train import Hyper, run_cell
+from denali_pipe.preprocess.histograms import background_means, crop_window, preprocess
+from denali_pipe.train.evaluate import load_cell, predict
+from denali_pipe.train.predict import capture_features, predict_capture, read_background, read_capture, softmax
+from denali_pipe.train.training import Hyper, run_cell
 
 N, BINS, REPEATS, LOCATION = 3, 128, 3, 37
 CLASSES = ("A", "B", "circle")
@@ -56,10 +56,10 @@ def rig(tmp_path_factory):
     x = rng.normal(0, 50, (len(samples), N, N, t)).astype(np.float32)
     runs = {}
     for task, norm in (("location", "raw"), ("shape", "log_z"), ("size", "raw")):
-        from denali_pipe.cells import Cell
+        from denali_pipe.train.cells import Cell
 
         cell = Cell(model="cnn1d", task=task, split="random", resolution="3x3", protocol="clean", seed=42)
-        result = run_cell(x, samples, cell, Hyper(lr=1e-3, epochs=1, batch_size=64, norm=norm), 0.2, "denali_pipe.models:cnn1d")
+        result = run_cell(x, samples, cell, Hyper(lr=1e-3, epochs=1, batch_size=64, norm=norm), 0.2, "denali_pipe.train.models:cnn1d")
         run = root / "runs" / task
         run.mkdir(parents=True)
         torch.save(result.state, run / "model.pt")

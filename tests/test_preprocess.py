@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from denali_pipe import preprocess as pp
+from denali_pipe.preprocess import histograms as pp
 
 
 def _pulse(bins=128, at=47.0, height=6000.0, floor=1300.0, tail=2.5):

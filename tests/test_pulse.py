@@ -1,4 +1,4 @@
-"""The SPAD pulse (`denali_pipe.pulse`): unit area, exact sub-bin shifts,
+"""The SPAD pulse (`denali_pipe.core.pulse`): unit area, exact sub-bin shifts,
 the fast rise and slow decay its parameters set, and a convolution that
 delays a return."""
 
@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from denali_pipe import geometry as geo
-from denali_pipe import pulse
+from denali_pipe.core import geometry as geo
+from denali_pipe.core import pulse
 
 DELAYS = np.arange(-geo.N_BINS + 1, geo.N_BINS)
 SPAD = pulse.Pulse(sigma_bins=0.6, fast_tail_bins=1.0, slow_tail_bins=15.0, slow_share=0.2)

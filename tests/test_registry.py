@@ -7,8 +7,8 @@ import yaml
 from conftest import REPO
 from torch import nn
 
-from denali_pipe.models import PAPER_MODELS
-from denali_pipe.registry import build, check_left_out, check_models, load_factory, n_outputs
+from denali_pipe.train.models import PAPER_MODELS
+from denali_pipe.train.registry import build, check_left_out, check_models, load_factory, n_outputs
 
 CONFIG = yaml.safe_load((REPO / "config" / "config.yaml").read_text())
 HP = {"lr": 1e-3, "epochs": 1, "batch_size": 8, "norm": "raw"}
@@ -26,7 +26,7 @@ def test_the_papers_four_are_registry_entries_of_their_factories():
 
 
 def test_build_follows_the_contract():
-    net = build("cnn1d", "denali_pipe.models:cnn1d", "shape", (3, 3, 40), n_classes=7)
+    net = build("cnn1d", "denali_pipe.train.models:cnn1d", "shape", (3, 3, 40), n_classes=7)
     assert isinstance(net, nn.Module) and net.out_linear.out_features == n_outputs("shape", 7) == 7
     assert n_outputs("location", 7) == 2 and n_outputs("size", 7) == 2
 
@@ -62,10 +62,10 @@ def test_a_wrong_left_out_entry_is_refused_naming_the_key(left_out, message):
 @pytest.mark.parametrize(
     ("models", "benchmark", "message"),
     [
-        ({"cnn1d": entry("denali_pipe.models:cnn1d")}, "mlp", "train.benchmark_model: 'mlp' is not a registered model"),
-        ({"my_net": entry("denali_pipe.models:cnn1d")}, "my_net", "train.models.my_net: a model name"),
-        ({"linear": entry("denali_pipe.models:cnn1d")}, "linear", "train.models.linear: a model name"),
-        ({"net": entry("denali_pipe.models.cnn1d")}, "net", "train.models.net.factory: 'denali_pipe.models.cnn1d' is not an import path"),
+        ({"cnn1d": entry("denali_pipe.train.models:cnn1d")}, "mlp", "train.benchmark_model: 'mlp' is not a registered model"),
+        ({"my_net": entry("denali_pipe.train.models:cnn1d")}, "my_net", "train.models.my_net: a model name"),
+        ({"linear": entry("denali_pipe.train.models:cnn1d")}, "linear", "train.models.linear: a model name"),
+        ({"net": entry("denali_pipe.train.models.cnn1d")}, "net", "train.models.net.factory: 'denali_pipe.train.models.cnn1d' is not an import path"),
         ({"net": entry("no_such_package.mod:f")}, "net", "train.models.net.factory: module 'no_such_package.mod' cannot be imported"),
         ({"net": entry("denali_pipe.no_such_module:f")}, "net", "train.models.net.factory: no module 'denali_pipe.no_such_module'"),
         ({"mlp": None}, "mlp", "train.models: no model registered"),
@@ -78,10 +78,10 @@ def test_a_wrong_entry_is_refused_naming_its_key(models, benchmark, message):
 
 
 def test_a_factory_that_does_not_resolve_or_build_names_its_key():
-    with pytest.raises(ValueError, match=r"train\.models\.net\.factory 'denali_pipe\.models:resnet': module 'denali_pipe\.models' has no 'resnet'"):
-        load_factory("net", "denali_pipe.models:resnet")
-    with pytest.raises(ValueError, match=r"train\.models\.net\.factory 'denali_pipe\.models:DROPOUT': 'DROPOUT' is not callable"):
-        load_factory("net", "denali_pipe.models:DROPOUT")
+    with pytest.raises(ValueError, match=r"train\.models\.net\.factory 'denali_pipe\.train\.models:resnet': module 'denali_pipe\.train\.models' has no 'resnet'"):
+        load_factory("net", "denali_pipe.train.models:resnet")
+    with pytest.raises(ValueError, match=r"train\.models\.net\.factory 'denali_pipe\.train\.models:DROPOUT': 'DROPOUT' is not callable"):
+        load_factory("net", "denali_pipe.train.models:DROPOUT")
 
 
 def test_a_module_in_the_workflow_folder_resolves_and_must_build_a_module(tmp_path, monkeypatch):

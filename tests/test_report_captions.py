@@ -10,7 +10,7 @@ from docutils.core import publish_parts
 from jinja2 import Environment, StrictUndefined
 from test_config import PRESETS, load, merged
 
-from denali_pipe.conditions import TABLES as CONDITION_TABLES
+from denali_pipe.train.conditions import TABLES as CONDITION_TABLES
 
 CAPTIONS = sorted((REPO / "report").glob("*.rst"))
 

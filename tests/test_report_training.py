@@ -3,11 +3,7 @@
 import pandas as pd
 import pytest
 
-from denali_pipe.cell_metrics import CellMetrics
-from denali_pipe.cells import SPLITS, TASKS, Cell, is_ill_posed
-from denali_pipe.conditions import CONDITION_GROUPS, TABLES
 from denali_pipe.experiments.jitter import jitter_condition, jitter_curve
-from denali_pipe.models import PAPER_MODELS
 from denali_pipe.report.condition_table import condition_table, write_condition_table
 from denali_pipe.report.jitter import plot_jitter
 from denali_pipe.report.paper import CONDITION_TABLES, TABLE5, TABLE10
@@ -17,6 +13,10 @@ from denali_pipe.report.table2 import write_table2
 from denali_pipe.report.table5 import write_table5
 from denali_pipe.report.table10 import write_table10
 from denali_pipe.report.training_curves import write_training_curves
+from denali_pipe.train.cell_metrics import CellMetrics
+from denali_pipe.train.cells import SPLITS, TASKS, Cell, is_ill_posed
+from denali_pipe.train.conditions import CONDITION_GROUPS, TABLES
+from denali_pipe.train.models import PAPER_MODELS
 
 MODELS = tuple(PAPER_MODELS)
 REG = {"mse": 0.0025, "rmse": 0.05, "mae": 0.04}

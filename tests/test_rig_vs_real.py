@@ -4,8 +4,8 @@ mean counts, on stores of the rig's own histograms."""
 import numpy as np
 import pandas as pd
 
-from denali_pipe import geometry as geo
-from denali_pipe.capture_sets import parse_set_name
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.capture_sets import parse_set_name
 from denali_pipe.io.store import StoreWriter, open_set
 from denali_pipe.report.paper import REAL_ZONE_MEANS
 from denali_pipe.report.rig_vs_real import REAL_ZONE_SOURCE, ZONE_SOURCE, rig_vs_real

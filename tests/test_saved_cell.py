@@ -4,8 +4,8 @@ import pytest
 import torch
 from test_train import HP, _cell, data, factory  # noqa: F401 (the fixture)
 
-from denali_pipe.saved_cell import FORMAT, MODEL_FILE, VERSION, SavedCell
-from denali_pipe.train import run_cell
+from denali_pipe.train.saved_cell import FORMAT, MODEL_FILE, VERSION, SavedCell
+from denali_pipe.train.training import run_cell
 
 
 @pytest.fixture(scope="module")
@@ -17,7 +17,7 @@ def record(data):  # noqa: F811
 def test_the_record_names_its_format_factory_and_shapes(record, data, tmp_path):  # noqa: F811
     x, _ = data
     assert record["format"] == FORMAT and record["version"] == VERSION
-    assert record["factory"] == "denali_pipe.models:cnn1d" and record["input_shape"] == list(x.shape[1:])
+    assert record["factory"] == "denali_pipe.train.models:cnn1d" and record["input_shape"] == list(x.shape[1:])
     assert record["classes"] == ["A", "B", "circle"] and record["cell"]["task"] == "shape"
     torch.save(record, tmp_path / MODEL_FILE)
     saved = SavedCell.load(tmp_path)

@@ -3,7 +3,7 @@ from types import SimpleNamespace
 
 from snakemake.scheduling.job_scheduler import JobScheduler
 
-from denali_pipe.scheduler_timer import PATCHED, keep_one_reevaluation_timer
+from denali_pipe.workflow.scheduler_timer import PATCHED, keep_one_reevaluation_timer
 
 
 def test_the_scheduler_keeps_one_pending_daemon_timer_whatever_triggers_its_passes():

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import zarr
 
-from denali_pipe.capture_sets import parse_set_name
+from denali_pipe.core.capture_sets import parse_set_name
 from denali_pipe.io.store import MODALITIES, STORE_VERSION, CaptureStore, StoreWriter, jsonable, open_set
 
 CS = parse_set_name("A_4inch_3x3_lighton")

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from conftest import ASSETS, REPO
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.poses import estimate_frames, filter_estimates
 from denali_pipe.report.paper import TABLE6
 from denali_pipe.report.table6 import TAG_IDS, table6, write_table6

@@ -8,9 +8,9 @@ import re
 from workflow import copy_workflow, merged_config, snakemake
 
 from denali_pipe.cli import main
-from denali_pipe.objects import load_catalogue
-from denali_pipe.targets import TARGETS, target_files
+from denali_pipe.core.objects import load_catalogue
 from denali_pipe.twin.selection import twin_pairs
+from denali_pipe.workflow.targets import TARGETS, target_files
 
 TINY = "config/presets/tiny.yaml"
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import ASSETS
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.rig.tracked_scene import WALL_GAP_M, design_scene, release_scene, tracked_scene
 
 POSES_JSON = ASSETS / "poses.json"

@@ -8,11 +8,11 @@ import pandas as pd
 import pytest
 import torch
 
-from denali_pipe.cells import Cell
-from denali_pipe.classical import run_linear
-from denali_pipe.models import PAPER_MODELS, cnn1d
-from denali_pipe.preprocess import normalise
-from denali_pipe.train import Hyper, fit, infer, loss_for, partition, run_cell, targets, training_device, training_precision
+from denali_pipe.preprocess.histograms import normalise
+from denali_pipe.train.cells import Cell
+from denali_pipe.train.classical import run_linear
+from denali_pipe.train.models import PAPER_MODELS, cnn1d
+from denali_pipe.train.training import Hyper, fit, infer, loss_for, partition, run_cell, targets, training_device, training_precision
 
 CLASSES = ("A", "B", "circle")
 N_LOC, REPEATS, BINS = 8, 3, 24
@@ -60,7 +60,7 @@ HP = Hyper(lr=3e-3, epochs=4, batch_size=32, norm="raw")
 
 def factory(model="cnn1d"):
     """The registry entry of one of the paper's models, as config.yaml names it."""
-    return f"denali_pipe.models:{model}"
+    return f"denali_pipe.train.models:{model}"
 
 
 def test_targets(data):
@@ -205,7 +205,7 @@ def test_fit_keeps_the_best_scoring_epoch_or_the_last(data, caplog):
         return {1: 0.0, 2: 5.0, 3: 1.0}[epoch]
 
     net = cnn1d("location", 2, (3, 3, BINS))
-    with caplog.at_level(logging.INFO, logger="denali_pipe.train"):
+    with caplog.at_level(logging.INFO, logger="denali_pipe.train.training"):
         fitted = fit(net, xt, yt, hp, 0, loss_for("location"), score, name="probe")
     assert fitted.best_epoch == 2 and fitted.epochs_run == 3 and fitted.samples_seen == 3 * len(xt)
     assert all(torch.equal(net.state_dict()[k], states[1][k]) for k in states[1])

@@ -10,11 +10,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from denali_pipe import geometry as geo
-from denali_pipe.capture_sets import parse_set_name
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.capture_sets import parse_set_name
 from denali_pipe.io.features import write_features
-from denali_pipe.preprocess import Features
-from denali_pipe.transforms import (
+from denali_pipe.preprocess.histograms import Features
+from denali_pipe.transforms.sim_to_real import (
     CENTRE_ZONE,
     FIDELITIES,
     KERNEL_BINS,
@@ -146,7 +146,7 @@ def test_recovery_down_to_identifiability(snr, unidentified, caplog):
     truth = truth_at_snr(snr, sim)
     pairs = synthetic_pairs(sim, truth, rng)
     fit = fit_transforms(pairs)
-    with caplog.at_level(logging.WARNING, logger="denali_pipe.transforms"):
+    with caplog.at_level(logging.WARNING, logger="denali_pipe.transforms.sim_to_real"):
         check = check_fit(pairs, fit, RESAMPLES, 0, LEVEL, MAX_REL_SE)
     assert set(check.unidentified) == unidentified, check.unidentified
     assert check.identifiable == (not unidentified)
@@ -437,7 +437,7 @@ def test_refits_without_a_scale_are_counted_and_leave_the_scale_unidentified(mon
     """A resample of weak captures may hold no object signal (fit_transforms
     raises): such refits are counted, not fatal, and flag the scale; with
     fewer than two refits left there is nothing to judge, which is an error."""
-    from denali_pipe import transforms as tr
+    from denali_pipe.transforms import sim_to_real as tr
 
     pairs = zone_pairs(np.full(ZONES, 1.0), np.random.default_rng(5), n=10).zone(0)
     t = fit_transforms(pairs)

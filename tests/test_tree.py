@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 from release_trees import write_set, write_tree
 
-from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, expected_sets
-from denali_pipe.geometry import N_LOCATIONS
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, expected_sets
+from denali_pipe.core.geometry import N_LOCATIONS
 from denali_pipe.io.release import location_span
 from denali_pipe.io.tree import misnamed_reason, survey_tree
 

@@ -8,7 +8,7 @@ import torch
 from test_train import _cell, data  # noqa: F401 (the fixture)
 
 from denali_pipe.experiments.tsne import N_CLASSES, pick_classes, run_tsne, separability, unseen_rows, write_tsne
-from denali_pipe.train import Hyper, partition, run_cell, targets
+from denali_pipe.train.training import Hyper, partition, run_cell, targets
 
 
 def test_classes_are_drawn_with_the_seed_among_the_8in_lights_off_ones():
@@ -36,7 +36,7 @@ def test_run_tsne_scores_only_the_cells_test_samples(tmp_path, data):  # noqa: F
     x, samples = data
     cell = _cell(task="shape")
     result = run_cell(
-        x, samples, cell, Hyper(lr=3e-3, epochs=1, batch_size=64, norm="raw"), validation_fraction=0.2, factory=f"denali_pipe.models:{cell.model}"
+        x, samples, cell, Hyper(lr=3e-3, epochs=1, batch_size=64, norm="raw"), validation_fraction=0.2, factory=f"denali_pipe.train.models:{cell.model}"
     )
     run = tmp_path / "run"
     run.mkdir()

@@ -66,7 +66,7 @@ def test_small_benchmark_and_figure(catalogue, tmp_path):
 
 
 def test_dag_selection(catalogue):
-    from denali_pipe.capture_sets import expected_sets
+    from denali_pipe.core.capture_sets import expected_sets
     from denali_pipe.twin.selection import fig18_sets, twin_pairs
 
     cfg = {"objects": ["A", "generalization1italic"], "sizes": ["4inch", "8inch"], "resolutions": ["3x3", "8x8"], "lightings": ["lighton", "lightoff"]}
@@ -81,7 +81,7 @@ def test_dag_selection(catalogue):
 
 
 def test_centre_block():
-    from denali_pipe.geometry import WALL
+    from denali_pipe.core.geometry import WALL
     from denali_pipe.twin.benchmark import centre_block
     from denali_pipe.twin.layout import pixel_centres
 

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from denali_pipe.pulse import Pulse
+from denali_pipe.core.pulse import Pulse
 from denali_pipe.twin import calibrate as C
 from denali_pipe.twin.layout import ZoneGeometry, load_calibration, nominal_scene, zone_footprints
 
@@ -153,7 +153,7 @@ def test_under_the_flood_the_emission_widths_come_back(cal, catalogue, tmp_path)
 
 
 def _mesh(catalogue):
-    from denali_pipe.meshes import object_mesh
+    from denali_pipe.core.meshes import object_mesh
 
     return object_mesh(catalogue["A"], "8inch")
 

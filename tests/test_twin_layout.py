@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from conftest import REPO
 
-from denali_pipe import geometry as geo
-from denali_pipe.meshes import object_mesh
-from denali_pipe.objects import BOTTOM_Y, load_catalogue
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.meshes import object_mesh
+from denali_pipe.core.objects import BOTTOM_Y, load_catalogue
 from denali_pipe.twin.layout import (
     Material,
     ZoneGeometry,

@@ -9,11 +9,11 @@ import json
 import numpy as np
 import pytest
 
-from denali_pipe import geometry as geo
-from denali_pipe import pulse
 from denali_pipe.cli import main
-from denali_pipe.meshes import front_samples, object_mesh
-from denali_pipe.pulse import Pulse
+from denali_pipe.core import geometry as geo
+from denali_pipe.core import pulse
+from denali_pipe.core.meshes import front_samples, object_mesh
+from denali_pipe.core.pulse import Pulse
 from denali_pipe.twin.analytic import AnalyticRenderer
 from denali_pipe.twin.layout import Flood, Material, load_calibration, nominal_scene, pixel_centres, twin_scene, zone_footprints
 from denali_pipe.twin.render import read_twin, render_twin

@@ -10,10 +10,10 @@ import yaml
 from release_trees import write_set, write_tree
 from workflow import copy_workflow, dry_runs, merged_config
 
-from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
-from denali_pipe.cells import TASKS
-from denali_pipe.geometry import N_LOCATIONS
-from denali_pipe.objects import load_catalogue
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
+from denali_pipe.core.geometry import N_LOCATIONS
+from denali_pipe.core.objects import load_catalogue
+from denali_pipe.train.cells import TASKS
 
 PRESETS = {"tiny": ("config/presets/tiny.yaml",), "demo": (), "paper": ("config/presets/paper.yaml",), "release": ("config/presets/release.yaml",)}
 SOURCES = ("synthetic", "release", "pickle")

@@ -14,8 +14,8 @@ import pytest
 from slurm_cluster import SlurmUnavailable, local_slurm
 from workflow import TABLE5, copy_workflow, job_counts, merged_config, reduced_configfiles, snakemake
 
-from denali_pipe import costs
-from denali_pipe.geometry import N_BINS
+from denali_pipe.core.geometry import N_BINS
+from denali_pipe.workflow import costs
 
 pytestmark = pytest.mark.slurm
 # the cell SLURM kills: nothing but Table 5 depends on it

@@ -15,14 +15,14 @@ import pytest
 from conftest import ASSETS
 from workflow import TABLE5, copy_workflow, merged_config, reduced_configfiles, snakemake
 
-from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
-from denali_pipe.cells import SPLITS, TASKS, is_ill_posed
-from denali_pipe.geometry import OBJECT_TAG_ID, select_locations
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
+from denali_pipe.core.geometry import OBJECT_TAG_ID, select_locations
+from denali_pipe.core.objects import BACKGROUNDS, load_catalogue
 from denali_pipe.io.pickle_stream import CAMERA_RECORDS, iter_records
 from denali_pipe.io.store import open_set
-from denali_pipe.objects import BACKGROUNDS, load_catalogue
 from denali_pipe.report.runs import METRICS, NA
 from denali_pipe.rig.capture import synth_sets
+from denali_pipe.train.cells import SPLITS, TASKS, is_ill_posed
 
 pytestmark = pytest.mark.e2e
 SOURCES = ("release", "pickle")

@@ -12,16 +12,16 @@ import pytest
 import torch
 from workflow import copy_workflow, job_counts, snakemake
 
-from denali_pipe.capture_sets import expected_sets
 from denali_pipe.cli.warm_start import worker_usage
-from denali_pipe.conditions import TABLES as CONDITION_TABLES
-from denali_pipe.conditions import table_conditions
+from denali_pipe.core.capture_sets import expected_sets
+from denali_pipe.core.geometry import select_locations
+from denali_pipe.core.objects import load_catalogue
 from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE
 from denali_pipe.experiments.generalisation import MODEL
-from denali_pipe.geometry import select_locations
 from denali_pipe.io.store import open_set
-from denali_pipe.objects import load_catalogue
-from denali_pipe.transforms import FIDELITIES
+from denali_pipe.train.conditions import TABLES as CONDITION_TABLES
+from denali_pipe.train.conditions import table_conditions
+from denali_pipe.transforms.sim_to_real import FIDELITIES
 from denali_pipe.twin.render import read_twin
 
 pytestmark = pytest.mark.e2e
@@ -302,10 +302,10 @@ def test_predict_and_export_a_tiny_capture_as_training_saw_it(tiny_run, tmp_path
     preprocessing, averaged over the repeats); `denali export` of the shape
     cell gives its logits."""
     from denali_pipe.cli import main
-    from denali_pipe.dataset import read_dataset
-    from denali_pipe.evaluate import load_cell, predict
-    from denali_pipe.export import load_export
-    from denali_pipe.predict import softmax
+    from denali_pipe.train.dataset import read_dataset
+    from denali_pipe.train.evaluate import load_cell, predict
+    from denali_pipe.train.export import load_export
+    from denali_pipe.train.predict import softmax
 
     results = tiny_run / "results"
     x, samples, _ = read_dataset(results / "datasets/3x3.zarr", results / "datasets/3x3.parquet")
@@ -532,9 +532,9 @@ def test_explorer_in_a_browser(tiny_run, tmp_path):
     from selenium.webdriver.common.actions.action_builder import ActionBuilder
     from selenium.webdriver.common.by import By
 
-    from denali_pipe.dataset import read_dataset
-    from denali_pipe.evaluate import load_cell, predict
     from denali_pipe.poses.pnp import project
+    from denali_pipe.train.dataset import read_dataset
+    from denali_pipe.train.evaluate import load_cell, predict
 
     browser.ensure_chromium()
     results = tiny_run / "results"

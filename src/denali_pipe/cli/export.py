@@ -10,9 +10,9 @@ log = logging.getLogger("denali")
 
 
 def cmd_export(args: argparse.Namespace) -> None:
-    from denali_pipe.evaluate import load_cell
-    from denali_pipe.export import EXTRA_FILE, export_cell
-    from denali_pipe.preprocess import read_crop_window
+    from denali_pipe.preprocess.histograms import read_crop_window
+    from denali_pipe.train.evaluate import load_cell
+    from denali_pipe.train.export import EXTRA_FILE, export_cell
 
     run = Path(args.run)
     meta = export_cell(load_cell(run), run, Path(args.out), None if args.crop is None else read_crop_window(Path(args.crop)))

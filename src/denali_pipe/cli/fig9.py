@@ -6,9 +6,9 @@ import argparse
 import logging
 from pathlib import Path
 
-from denali_pipe.cells import PRECISIONS
 from denali_pipe.cli.common import json_arg
 from denali_pipe.cli.fit import pairs_and_split
+from denali_pipe.train.cells import PRECISIONS
 
 log = logging.getLogger("denali")
 
@@ -18,11 +18,11 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     import pandas as pd
     import torch
 
-    from denali_pipe.dataset import location_labels
     from denali_pipe.experiments.fig9 import run_fig9
     from denali_pipe.report.fig9 import write_fig9
-    from denali_pipe.train import Hyper, cpu_has_amx, training_precision
-    from denali_pipe.transforms import read_fit_check, read_transforms
+    from denali_pipe.train.dataset import location_labels
+    from denali_pipe.train.training import Hyper, cpu_has_amx, training_precision
+    from denali_pipe.transforms.sim_to_real import read_fit_check, read_transforms
 
     torch.set_num_threads(args.threads)
     pairs, _ = pairs_and_split(args)

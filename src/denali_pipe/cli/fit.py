@@ -13,7 +13,7 @@ log = logging.getLogger("denali")
 
 def pairs_and_split(args: argparse.Namespace):
     """The sim-to-real pairs of --features and --twins and the real train/test split of --config."""
-    from denali_pipe.transforms import build_pairs, split_pairs
+    from denali_pipe.transforms.sim_to_real import build_pairs, split_pairs
 
     require_keys(args.config, {"seed", "fit"})
     pairs = build_pairs([Path(p) for p in args.features], [Path(p) for p in args.twins])
@@ -23,7 +23,7 @@ def pairs_and_split(args: argparse.Namespace):
 def cmd_transforms(args: argparse.Namespace) -> None:
     import time
 
-    from denali_pipe.transforms import check_fit, choose_mode, fit_zone_transforms, write_transforms
+    from denali_pipe.transforms.sim_to_real import check_fit, choose_mode, fit_zone_transforms, write_transforms
 
     t0 = time.perf_counter()
     pairs, split = pairs_and_split(args)

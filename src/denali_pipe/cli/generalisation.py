@@ -10,9 +10,9 @@ log = logging.getLogger("denali")
 
 
 def cmd_evaluate(args: argparse.Namespace) -> None:
-    from denali_pipe.atomic import atomic_file
-    from denali_pipe.dataset import read_dataset
-    from denali_pipe.evaluate import evaluate_run
+    from denali_pipe.core.atomic import atomic_file
+    from denali_pipe.train.dataset import read_dataset
+    from denali_pipe.train.evaluate import evaluate_run
 
     x, samples, _ = read_dataset(Path(args.dataset), Path(args.table))
     evaluation = evaluate_run(Path(args.run), x, samples, Path(args.dataset))
@@ -22,15 +22,15 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
 
 
 def _generalisation_inputs(args: argparse.Namespace) -> tuple[list, list]:
-    from denali_pipe.cell_metrics import CellMetrics
-    from denali_pipe.evaluate import Evaluation
+    from denali_pipe.train.cell_metrics import CellMetrics
+    from denali_pipe.train.evaluate import Evaluation
 
     return [CellMetrics.read(Path(p)) for p in args.cells], [Evaluation.read(Path(p)) for p in args.evaluations]
 
 
 def cmd_fig10(args: argparse.Namespace) -> None:
-    from denali_pipe.dataset import read_dataset
     from denali_pipe.experiments.generalisation import fig10, histogram_table
+    from denali_pipe.train.dataset import read_dataset
 
     x_variant, variant, crop = read_dataset(Path(args.variant_dataset), Path(args.variant_table))
     x_base, base, base_crop = read_dataset(Path(args.base_dataset), Path(args.base_table))

@@ -12,9 +12,9 @@ log = logging.getLogger("denali")
 
 
 def cmd_ingest(args: argparse.Namespace) -> None:
-    from denali_pipe.atomic import atomic_file
-    from denali_pipe.ingest import ingest_set
-    from denali_pipe.objects import spec_from_dict
+    from denali_pipe.core.atomic import atomic_file
+    from denali_pipe.core.objects import spec_from_dict
+    from denali_pipe.ingest.capture_set import ingest_set
 
     spec = None if args.object is None else spec_from_dict(args.object)
     index = ingest_set(Path(args.source), Path(args.store), spec)
@@ -26,7 +26,7 @@ def cmd_ingest(args: argparse.Namespace) -> None:
 def cmd_index(args: argparse.Namespace) -> None:
     import pandas as pd
 
-    from denali_pipe.atomic import atomic_file
+    from denali_pipe.core.atomic import atomic_file
 
     captures = pd.concat([pd.read_parquet(p) for p in args.indexes], ignore_index=True)
     with atomic_file(Path(args.out)) as tmp:

@@ -10,7 +10,7 @@ log = logging.getLogger("denali")
 
 
 def cmd_poses(args: argparse.Namespace) -> None:
-    from denali_pipe.atomic import atomic_file
+    from denali_pipe.core.atomic import atomic_file
     from denali_pipe.poses.estimate import detect_set
 
     table = detect_set(Path(args.store))
@@ -32,7 +32,7 @@ def _lit_tables(paths: list[str], verb: str) -> list:
 def cmd_calibrate(args: argparse.Namespace) -> None:
     import json
 
-    from denali_pipe.atomic import atomic_file
+    from denali_pipe.core.atomic import atomic_file
     from denali_pipe.poses.calibrate import calibrate
 
     cal = calibrate(_lit_tables(args.poses, "calibrate"))
@@ -59,7 +59,7 @@ def cmd_table6(args: argparse.Namespace) -> None:
 def cmd_detections(args: argparse.Namespace) -> None:
     import pandas as pd
 
-    from denali_pipe.atomic import atomic_file
+    from denali_pipe.core.atomic import atomic_file
     from denali_pipe.poses.calibrate import detection_rates, pool
 
     with atomic_file(Path(args.out)) as tmp:

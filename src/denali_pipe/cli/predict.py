@@ -11,9 +11,9 @@ log = logging.getLogger("denali")
 
 
 def cmd_predict(args: argparse.Namespace) -> None:
-    from denali_pipe.evaluate import load_cell
-    from denali_pipe.predict import predict_capture, read_background, read_capture
-    from denali_pipe.preprocess import read_crop_window
+    from denali_pipe.preprocess.histograms import read_crop_window
+    from denali_pipe.train.evaluate import load_cell
+    from denali_pipe.train.predict import predict_capture, read_background, read_capture
 
     cells = [(Path(r), load_cell(Path(r))) for r in args.runs]
     capture = read_capture(Path(args.capture), args.location)

@@ -12,11 +12,11 @@ log = logging.getLogger("denali")
 def cmd_crop_window(args: argparse.Namespace) -> None:
     import json
 
-    from denali_pipe import geometry as geo
-    from denali_pipe.atomic import atomic_file
+    from denali_pipe.core import geometry as geo
+    from denali_pipe.core.atomic import atomic_file
+    from denali_pipe.core.objects import SIZES
     from denali_pipe.io.store import open_set
-    from denali_pipe.objects import SIZES
-    from denali_pipe.preprocess import DIRECT_END_FRACTION, crop_window
+    from denali_pipe.preprocess.histograms import DIRECT_END_FRACTION, crop_window
     from denali_pipe.twin.layout import load_calibration, three_bounce_lead
 
     stores = [open_set(Path(p)) for p in args.backgrounds]
@@ -37,7 +37,7 @@ def cmd_crop_window(args: argparse.Namespace) -> None:
 def cmd_preprocess(args: argparse.Namespace) -> None:
     from denali_pipe.io.features import write_features
     from denali_pipe.io.store import open_set
-    from denali_pipe.preprocess import background_means, preprocess, read_crop_window
+    from denali_pipe.preprocess.histograms import background_means, preprocess, read_crop_window
 
     store, bg = open_set(Path(args.store)), open_set(Path(args.background))
     window = read_crop_window(Path(args.crop))
@@ -52,9 +52,9 @@ def cmd_preprocess(args: argparse.Namespace) -> None:
 def cmd_dataset(args: argparse.Namespace) -> None:
     import pandas as pd
 
-    from denali_pipe.dataset import build_dataset, location_labels, write_dataset
+    from denali_pipe.core.objects import load_catalogue
     from denali_pipe.io.features import read_features
-    from denali_pipe.objects import load_catalogue
+    from denali_pipe.train.dataset import build_dataset, location_labels, write_dataset
 
     x, samples = build_dataset(
         [Path(p) for p in args.features], load_catalogue(args.objects_sheet), location_labels(pd.read_parquet(args.positions)), args.variant

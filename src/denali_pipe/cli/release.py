@@ -13,11 +13,11 @@ log = logging.getLogger("denali")
 def cmd_check_release(args: argparse.Namespace) -> None:
     import yaml
 
-    from denali_pipe.atomic import atomic_file
-    from denali_pipe.capture_sets import expected_sets, select_sets
+    from denali_pipe.core.atomic import atomic_file
+    from denali_pipe.core.capture_sets import expected_sets, select_sets
+    from denali_pipe.core.objects import load_catalogue
     from denali_pipe.io.tree import survey_tree
-    from denali_pipe.objects import load_catalogue
-    from denali_pipe.workflow_config import load_config
+    from denali_pipe.workflow.config import load_config
 
     config = load_config(args.configfile, args.defaults)
     source = args.source or (config["source"] if config["source"] != "synthetic" else "release")

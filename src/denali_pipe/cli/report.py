@@ -14,13 +14,13 @@ LEFT_OUT_KINDS = ("table2", "table10", "speed-vs-accuracy")
 
 
 def cmd_training_report(args: argparse.Namespace) -> None:
-    from denali_pipe.conditions import TABLES
     from denali_pipe.report.condition_table import write_condition_table
     from denali_pipe.report.speed_vs_accuracy import write_speed_vs_accuracy
     from denali_pipe.report.table2 import write_table2
     from denali_pipe.report.table5 import write_table5
     from denali_pipe.report.table10 import write_table10
     from denali_pipe.report.training_curves import write_training_curves
+    from denali_pipe.train.conditions import TABLES
 
     paths, out = [Path(p) for p in args.runs], Path(args.out)
     if args.left_out and args.kind not in LEFT_OUT_KINDS:
@@ -42,8 +42,8 @@ def cmd_training_report(args: argparse.Namespace) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from denali_pipe.conditions import CONDITION_GROUPS
-    from denali_pipe.conditions import TABLES as CONDITION_TABLES
+    from denali_pipe.train.conditions import CONDITION_GROUPS
+    from denali_pipe.train.conditions import TABLES as CONDITION_TABLES
 
     s = sub.add_parser("report", help="a training table or figure from cells' metrics.json / curves.csv")
     s.add_argument("kind", choices=["table2", "table5", *CONDITION_TABLES, "table10", "fig16", "fig17", "speed-vs-accuracy"])

@@ -12,8 +12,8 @@ log = logging.getLogger("denali")
 
 
 def cmd_rig(args: argparse.Namespace) -> None:
-    from denali_pipe.capture_sets import parse_set_name
-    from denali_pipe.objects import spec_from_dict
+    from denali_pipe.core.capture_sets import parse_set_name
+    from denali_pipe.core.objects import spec_from_dict
     from denali_pipe.rig.capture import synth_sets
 
     outs = [Path(p) for p in args.outs]

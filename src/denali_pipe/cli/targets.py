@@ -6,7 +6,7 @@ import argparse
 
 
 def cmd_targets(args: argparse.Namespace) -> None:
-    from denali_pipe.targets import listing
+    from denali_pipe.workflow.targets import listing
 
     print(listing())
 

@@ -6,8 +6,8 @@ import argparse
 import logging
 from pathlib import Path
 
-from denali_pipe.cells import PRECISIONS
 from denali_pipe.cli.common import json_arg
+from denali_pipe.train.cells import PRECISIONS
 
 log = logging.getLogger("denali")
 
@@ -15,13 +15,13 @@ log = logging.getLogger("denali")
 def cmd_train(args: argparse.Namespace) -> None:
     import torch
 
-    from denali_pipe.atomic import atomic_dir
-    from denali_pipe.cell_metrics import METRICS_FILE
-    from denali_pipe.cells import LINEAR, Cell
-    from denali_pipe.conditions import condition_view
-    from denali_pipe.dataset import read_dataset
-    from denali_pipe.saved_cell import MODEL_FILE
-    from denali_pipe.train import Hyper, cpu_has_amx, run_cell, training_device, training_precision
+    from denali_pipe.core.atomic import atomic_dir
+    from denali_pipe.train.cell_metrics import METRICS_FILE
+    from denali_pipe.train.cells import LINEAR, Cell
+    from denali_pipe.train.conditions import condition_view
+    from denali_pipe.train.dataset import read_dataset
+    from denali_pipe.train.saved_cell import MODEL_FILE
+    from denali_pipe.train.training import Hyper, cpu_has_amx, run_cell, training_device, training_precision
 
     torch.set_num_threads(args.threads)
     cell = Cell(**args.cell)
@@ -32,7 +32,7 @@ def cmd_train(args: argparse.Namespace) -> None:
         raise ValueError(f"{args.table}: {e}") from None
     if cell.model == LINEAR:
         # imported here: scikit-learn costs every neural cell's job ~1.5 CPU-s to import
-        from denali_pipe.classical import run_linear
+        from denali_pipe.train.classical import run_linear
 
         result = run_linear(x, samples, cell, args.validation_fraction)
     elif args.factory is None:

@@ -12,8 +12,8 @@ log = logging.getLogger("denali")
 def cmd_tsne(args: argparse.Namespace) -> None:
     import torch
 
-    from denali_pipe.dataset import read_dataset
     from denali_pipe.experiments.tsne import run_tsne, write_tsne
+    from denali_pipe.train.dataset import read_dataset
 
     torch.set_num_threads(args.threads)
     x, samples, _ = read_dataset(Path(args.dataset), Path(args.table))

@@ -12,7 +12,7 @@ log = logging.getLogger("denali")
 
 
 def cmd_twin(args: argparse.Namespace) -> None:
-    from denali_pipe.objects import spec_from_dict
+    from denali_pipe.core.objects import spec_from_dict
     from denali_pipe.twin.render import render_twin
 
     require_keys(args.config, {"seed", "resolutions", "twin"})
@@ -24,9 +24,9 @@ def cmd_twin(args: argparse.Namespace) -> None:
 def cmd_twin_calibration(args: argparse.Namespace) -> None:
     import time
 
-    from denali_pipe.objects import spec_from_dict
+    from denali_pipe.core.objects import spec_from_dict
     from denali_pipe.report.twin_calibration import plot_calibration
-    from denali_pipe.transforms import read_real, split_pairs
+    from denali_pipe.transforms.sim_to_real import read_real, split_pairs
     from denali_pipe.twin.calibrate import Captures, at_bound, calibrate, write_calibration
     from denali_pipe.twin.layout import load_calibration
 
@@ -59,7 +59,7 @@ def cmd_twin_calibration(args: argparse.Namespace) -> None:
 
 
 def cmd_render_benchmark(args: argparse.Namespace) -> None:
-    from denali_pipe.objects import spec_from_dict
+    from denali_pipe.core.objects import spec_from_dict
     from denali_pipe.report.render_benchmark import plot_render_benchmark
     from denali_pipe.twin.benchmark import run_benchmark
     from denali_pipe.twin.layout import load_calibration

@@ -43,13 +43,13 @@ import pandas as pd
 import torch
 from torch import nn
 
-from denali_pipe.metrics import predict_mean_baseline, regression_metrics
-from denali_pipe.models import cnn1d
-from denali_pipe.preprocess import normalise
-from denali_pipe.registry import N_LOCATION_OUTPUTS
-from denali_pipe.seeds import derive_seed, rng_for
-from denali_pipe.train import Hyper, fit, infer, loss_for
-from denali_pipe.transforms import CENTRE_ZONE, FIDELITIES, GRID, ZONES, Pairs, ZoneTransforms, split_pairs
+from denali_pipe.core.seeds import derive_seed, rng_for
+from denali_pipe.preprocess.histograms import normalise
+from denali_pipe.train.metrics import predict_mean_baseline, regression_metrics
+from denali_pipe.train.models import cnn1d
+from denali_pipe.train.registry import N_LOCATION_OUTPUTS
+from denali_pipe.train.training import Hyper, fit, infer, loss_for
+from denali_pipe.transforms.sim_to_real import CENTRE_ZONE, FIDELITIES, GRID, ZONES, Pairs, ZoneTransforms, split_pairs
 
 log = logging.getLogger(__name__)
 

@@ -35,11 +35,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from denali_pipe.cell_metrics import CellMetrics
-from denali_pipe.cells import TASKS
-from denali_pipe.evaluate import Evaluation
 from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.report.runs import HEADLINE
+from denali_pipe.train.cell_metrics import CellMetrics
+from denali_pipe.train.cells import TASKS
+from denali_pipe.train.evaluate import Evaluation
 
 BASE_TEST = "base test split"
 ANY_DATA = "any"  # the `data` of chance, which does not depend on the samples

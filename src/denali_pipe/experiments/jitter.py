@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from denali_pipe.geometry import BIN_WIDTH_PS, RESOLUTIONS
+from denali_pipe.core.geometry import BIN_WIDTH_PS, RESOLUTIONS
 
 if TYPE_CHECKING:
     import pandas as pd

@@ -35,11 +35,11 @@ from sklearn.metrics import silhouette_score
 from sklearn.model_selection import StratifiedKFold, cross_val_score
 from sklearn.neighbors import KNeighborsClassifier
 
-from denali_pipe.cell_metrics import METRICS_FILE, CellMetrics
-from denali_pipe.evaluate import embed, load_cell
+from denali_pipe.core.seeds import derive_seed, rng_for
 from denali_pipe.report.figure import plt, save_figure
-from denali_pipe.seeds import derive_seed, rng_for
-from denali_pipe.train import partition, targets
+from denali_pipe.train.cell_metrics import METRICS_FILE, CellMetrics
+from denali_pipe.train.evaluate import embed, load_cell
+from denali_pipe.train.training import partition, targets
 
 N_CLASSES = 3  # the paper's "three randomly selected object classes"
 SIZE, LIGHT = "8inch", "lightoff"  # the paper's selection

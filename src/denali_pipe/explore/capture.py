@@ -15,13 +15,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from denali_pipe import geometry as geo
-from denali_pipe.capture_sets import CaptureSet
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.capture_sets import CaptureSet
 from denali_pipe.explore.outputs import POSITIONS, SCENE, TRANSFORMS, Inventory, crop_path, features_path, index_path, store_path, twin_path
 from denali_pipe.io.features import read_features
 from denali_pipe.io.store import CaptureStore, open_set
-from denali_pipe.preprocess import CropWindow, read_crop_window
-from denali_pipe.transforms import CENTRE_ZONE, apply, read_transforms
+from denali_pipe.preprocess.histograms import CropWindow, read_crop_window
+from denali_pipe.transforms.sim_to_real import CENTRE_ZONE, apply, read_transforms
 from denali_pipe.twin.render import read_twin
 
 # The twin's overlay: the transforms that shape its mean (scale, then blur);

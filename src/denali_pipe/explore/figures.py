@@ -16,7 +16,7 @@ import pandas as pd
 import plotly.graph_objects as go
 import plotly.io as pio
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 
 TRUTH, PREDICTED, MEASURED, BACKGROUND, TWIN, OTHER = "#1a9850", "#d73027", "#2166ac", "#878787", "#e08214", "#92c5de"
 BIN_PS = geo.BIN_WIDTH_OPL / 299_792_458.0 * 1e12  # one histogram bin, picoseconds

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from denali_pipe.capture_sets import CaptureSet, parse_set_name
-from denali_pipe.cells import ALL, TASKS, is_ill_posed
-from denali_pipe.geometry import RESOLUTIONS
-from denali_pipe.saved_cell import MODEL_FILE
+from denali_pipe.core.capture_sets import CaptureSet, parse_set_name
+from denali_pipe.core.geometry import RESOLUTIONS
+from denali_pipe.train.cells import ALL, TASKS, is_ill_posed
+from denali_pipe.train.saved_cell import MODEL_FILE
 
 ZARR = ".zarr"
 STORES = "store"

@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from denali_pipe.cell_metrics import METRICS_FILE, CellMetrics
-from denali_pipe.dataset import read_dataset
-from denali_pipe.evaluate import TrainedCell, load_cell, predict, score
 from denali_pipe.explore.outputs import CellChoice, Inventory, dataset_paths
-from denali_pipe.predict import softmax
-from denali_pipe.saved_cell import MODEL_FILE
-from denali_pipe.train import partition, targets
+from denali_pipe.train.cell_metrics import METRICS_FILE, CellMetrics
+from denali_pipe.train.dataset import read_dataset
+from denali_pipe.train.evaluate import TrainedCell, load_cell, predict, score
+from denali_pipe.train.predict import softmax
+from denali_pipe.train.saved_cell import MODEL_FILE
+from denali_pipe.train.training import partition, targets
 
 # What the per-location heat map shows for each task: the `evaluate.score`
 # metric (m or a share, shown x 100), its name and unit.

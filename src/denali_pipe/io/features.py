@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from denali_pipe.atomic import atomic_dir
-from denali_pipe.capture_sets import CaptureSet, parse_set_name
-from denali_pipe.preprocess import Features
+from denali_pipe.core.atomic import atomic_dir
+from denali_pipe.core.capture_sets import CaptureSet, parse_set_name
+from denali_pipe.preprocess.histograms import Features
 
 FORMAT_VERSION = 1
 

@@ -41,9 +41,9 @@ import numpy as np
 import zarr
 from zarr.codecs import BloscCodec
 
-from denali_pipe.atomic import atomic_dir
-from denali_pipe.capture_sets import CaptureSet, parse_set_name
-from denali_pipe.geometry import N_BINS
+from denali_pipe.core.atomic import atomic_dir
+from denali_pipe.core.capture_sets import CaptureSet, parse_set_name
+from denali_pipe.core.geometry import N_BINS
 from denali_pipe.io.release import FRAME_DIRS
 
 STORE_VERSION = 1

@@ -21,8 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, background_of, parse_set_name
-from denali_pipe.geometry import N_LOCATIONS
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, background_of, parse_set_name
+from denali_pipe.core.geometry import N_LOCATIONS
 from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, location_span
 
 SOURCES = ("release", "pickle")

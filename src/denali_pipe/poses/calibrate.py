@@ -25,7 +25,7 @@ from typing import Iterable
 import numpy as np
 import pandas as pd
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.poses.estimate import STATUSES, check_object_coverage
 from denali_pipe.poses.filtering import DEFAULT_METHOD, THRESHOLD, filter_estimates, summarise
 from denali_pipe.poses.pnp import mean_rotation, rigid_fit

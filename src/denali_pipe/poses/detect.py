@@ -37,7 +37,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 
 DETECTORS = ("apriltag", "aruco")
 DEFAULT_DETECTOR = "apriltag"

@@ -49,7 +49,7 @@ from typing import Iterable
 import numpy as np
 import pandas as pd
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.io.store import open_set
 from denali_pipe.poses.detect import DEFAULT_DETECTOR, Detection, TagDetector, to_grey
 from denali_pipe.poses.layout import Layout, estimate_layout

@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 
 THRESHOLD = 2.0
 MIN_FILTER_N = 6  # groups of n <= 5 are kept whole and flagged

@@ -52,8 +52,8 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from denali_pipe import geometry as geo
-from denali_pipe.geometry import Pose
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.geometry import Pose
 from denali_pipe.poses.detect import quad_centre
 from denali_pipe.poses.pnp import Fit, project, solve_board
 from denali_pipe.poses.template import fit_template

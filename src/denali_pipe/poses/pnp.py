@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from denali_pipe import geometry as geo
-from denali_pipe.geometry import Intrinsics
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.geometry import Intrinsics
 
 _NO_DIST = np.zeros(5)
 

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 import pandas as pd
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 from denali_pipe.io.store import open_set
 from denali_pipe.report.figure import plt, save_figure
 

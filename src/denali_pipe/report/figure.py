@@ -15,7 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from denali_pipe.atomic import atomic_file  # noqa: E402
+from denali_pipe.core.atomic import atomic_file  # noqa: E402
 
 DPI = 110
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from denali_pipe.geometry import BIN_WIDTH_PS
+from denali_pipe.core.geometry import BIN_WIDTH_PS
 from denali_pipe.report.figure import plt, save_figure
 
 TASK_TITLES = {"location": "location (lower is better)", "shape": "shape (higher is better)", "size": "size (higher is better)"}

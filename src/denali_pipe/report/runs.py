@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from denali_pipe.cell_metrics import CellMetrics
+from denali_pipe.train.cell_metrics import CellMetrics
 
 # Table metric name -> (task, metric key in metrics.json); the paper's columns.
 METRICS = {

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from denali_pipe.atomic import atomic_file
-from denali_pipe.cells import TASKS
+from denali_pipe.core.atomic import atomic_file
 from denali_pipe.report.paper import TABLE10, TABLE10_COLUMNS
 from denali_pipe.report.runs import NA, left_out_note, load_runs, protocol_of, seed_stats
+from denali_pipe.train.cells import TASKS
 
 
 def write_table10(metrics_paths: list[Path], out: Path, left_out: dict[str, str] | None = None) -> None:

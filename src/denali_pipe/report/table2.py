@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from denali_pipe.atomic import atomic_file
+from denali_pipe.core.atomic import atomic_file
 from denali_pipe.report.paper import TABLE2
 from denali_pipe.report.runs import left_out_note, load_runs, metric_table, protocol_of
 

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from denali_pipe.atomic import atomic_file
-from denali_pipe.capture_sets import parse_set_name
+from denali_pipe.core.atomic import atomic_file
+from denali_pipe.core.capture_sets import parse_set_name
 from denali_pipe.report.paper import TABLE4_GB
 
 # Table 4's modality -> the store's array holding it ("metadata": the group itself)

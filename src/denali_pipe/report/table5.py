@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from denali_pipe.atomic import atomic_file
-from denali_pipe.cells import SPLITS
+from denali_pipe.core.atomic import atomic_file
 from denali_pipe.report.paper import TABLE5
 from denali_pipe.report.runs import load_runs, metric_table, protocol_of
+from denali_pipe.train.cells import SPLITS
 
 
 def write_table5(metrics_paths: list[Path], out: Path) -> None:

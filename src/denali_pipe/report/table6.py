@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from denali_pipe import geometry as geo
-from denali_pipe.atomic import atomic_file
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.atomic import atomic_file
 from denali_pipe.poses.filtering import DEFAULT_METHOD, THRESHOLD, filter_estimates, summarise
 from denali_pipe.report.paper import TABLE6
 

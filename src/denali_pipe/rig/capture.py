@@ -34,17 +34,17 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from denali_pipe import geometry as geo
-from denali_pipe.atomic import atomic_dir, atomic_file
-from denali_pipe.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.atomic import atomic_dir, atomic_file
+from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet
+from denali_pipe.core.objects import BACKGROUND_SIZE, ObjectSpec
+from denali_pipe.core.seeds import rng_for
 from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE, PUBLIC_FRAME_DIRS
-from denali_pipe.objects import BACKGROUND_SIZE, ObjectSpec
 from denali_pipe.rig.frames import frame_tags, render_frame
 from denali_pipe.rig.histograms import Photometry, Scatterer, counts_from_transport, sample_counts, transport
 from denali_pipe.rig.nuisances import SetNuisance, capture_conditions, draw_set, gantry_offset
 from denali_pipe.rig.scene import mount_scatterer, object_scatterer
 from denali_pipe.rig.tracked_scene import TrackedScene, tracked_scene
-from denali_pipe.seeds import rng_for
 
 PNG_PARAMS = [cv2.IMWRITE_PNG_COMPRESSION, 1]  # fast; ingest recompresses anyway
 TRUTH_FILE = "rig_truth.json"

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.objects import BOTTOM_Y, SIZES
 from denali_pipe.io.store import open_set
-from denali_pipe.objects import BOTTOM_Y, SIZES
 from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.rig.histograms import wall_samples
 

@@ -5,7 +5,7 @@ depth (z16, millimetres) frame from the tracking camera (above and behind the
 scene, 1280x720) and from the co-located camera next to the LiDAR (848x480,
 looking at the relay wall). This module renders frames with the same layout
 from a tracked scene (`rig.tracked_scene`: our design drawing in
-`denali_pipe.geometry`, or a release's measured poses), so that the pose stage
+`denali_pipe.core.geometry`, or a release's measured poses), so that the pose stage
 can run the real AprilTag detector on them and recover that geometry.
 
 Rendering model (all cheap enough for a frame in tens of milliseconds):
@@ -32,8 +32,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from denali_pipe import geometry as g
-from denali_pipe.geometry import Camera, Pose
+from denali_pipe.core import geometry as g
+from denali_pipe.core.geometry import Camera, Pose
 from denali_pipe.rig.tracked_scene import TrackedScene, design_scene
 
 # --- scene appearance -----------------------------------------------------------

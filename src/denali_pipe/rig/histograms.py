@@ -41,8 +41,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from denali_pipe import geometry as geo
-from denali_pipe import pulse
+from denali_pipe.core import geometry as geo
+from denali_pipe.core import pulse
 
 # Wall sub-samples per zone side: enough that the OPL spread inside one sample
 # cell (largest in the zones that see the wall obliquely, ~3 bins) stays near
@@ -110,7 +110,7 @@ class Photometry:
 
     @property
     def pulse(self) -> pulse.Pulse:
-        """The instrument response these parameters set (`denali_pipe.pulse`)."""
+        """The instrument response these parameters set (`denali_pipe.core.pulse`)."""
         return pulse.Pulse(self.pulse_sigma_bins, self.pulse_tail_bins, self.slow_tail_bins, self.slow_tail_fraction)
 
     def emission(self, d_cam: np.ndarray) -> np.ndarray:

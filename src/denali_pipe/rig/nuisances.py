@@ -41,9 +41,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.seeds import rng_for
 from denali_pipe.rig.histograms import Conditions
-from denali_pipe.seeds import rng_for
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from denali_pipe import geometry as geo
-from denali_pipe.meshes import front_samples, object_mesh, sample_spacing
-from denali_pipe.objects import ObjectSpec
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.meshes import front_samples, object_mesh, sample_spacing
+from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.rig.histograms import Scatterer
 
 MOUNT_SPACING = 0.02  # m; the post is diffuse and dim, so a coarse grid suffices

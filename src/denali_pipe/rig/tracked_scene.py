@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from denali_pipe import geometry as geo
-from denali_pipe.geometry import Pose, Rect
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.geometry import Pose, Rect
 
 DESIGN = "design"
 WALL_GAP_M = 0.001  # the visual wall lies this far behind its tags

@@ -54,8 +54,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import convolve1d
 
-from denali_pipe import geometry as geo
-from denali_pipe.meshes import front_samples
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.meshes import front_samples
 from denali_pipe.twin.layout import Material, TwinScene, pixel_centres
 
 FILTERS = ("box", "tent")

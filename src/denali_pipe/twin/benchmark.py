@@ -44,10 +44,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from denali_pipe.geometry import Rect
-from denali_pipe.meshes import object_mesh
-from denali_pipe.objects import ObjectSpec
-from denali_pipe.seeds import derive_seed, rng_for
+from denali_pipe.core.geometry import Rect
+from denali_pipe.core.meshes import object_mesh
+from denali_pipe.core.objects import ObjectSpec
+from denali_pipe.core.seeds import derive_seed, rng_for
 from denali_pipe.twin.layout import Calibration, material_of, pixels_inside, twin_scene, zone_footprints
 from denali_pipe.twin.render import make_renderer
 

@@ -17,7 +17,7 @@ Parameters:
 Nuisances, fitted beside them but not part of the twin: each zone's gain
 (counts per unit of the twin's radiance: the sensor's illumination and
 response pattern, solved in closed form at every step) and the sensor's
-pulse (`denali_pipe.pulse`: the jitter's sd and the SPAD tail's time
+pulse (`denali_pipe.core.pulse`: the jitter's sd and the SPAD tail's time
 constant; the transforms model the pulse). The pulse's slow part is left
 out: background subtraction leaves too little of it to identify (fitted
 on the demo, its share went to its 0.25 % bound and its time constant to
@@ -55,12 +55,12 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares
 
-from denali_pipe import geometry as geo
-from denali_pipe import pulse
-from denali_pipe.atomic import atomic_file
-from denali_pipe.meshes import object_mesh
-from denali_pipe.objects import ObjectSpec
-from denali_pipe.pulse import Pulse
+from denali_pipe.core import geometry as geo
+from denali_pipe.core import pulse
+from denali_pipe.core.atomic import atomic_file
+from denali_pipe.core.meshes import object_mesh
+from denali_pipe.core.objects import ObjectSpec
+from denali_pipe.core.pulse import Pulse
 from denali_pipe.twin.analytic import AnalyticRenderer
 from denali_pipe.twin.layout import Calibration, Material, TwinScene, ZoneGeometry, material_of, twin_scene, zone_footprints
 

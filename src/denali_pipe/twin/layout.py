@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from denali_pipe import geometry as geo
-from denali_pipe.geometry import Camera, Intrinsics, Pose, Rect
-from denali_pipe.objects import BOTTOM_Y
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.geometry import Camera, Intrinsics, Pose, Rect
+from denali_pipe.core.objects import BOTTOM_Y
 from denali_pipe.twin.illumination import check_illumination
 
 MATERIALS = ("lambertian", "retroreflective")
@@ -393,7 +393,7 @@ def twin_scene(
 
 def nominal_scene(locations) -> dict:
     """A scene.json document (the parts `load_calibration` reads) from the
-    rig's design geometry in `denali_pipe.geometry`, for gantry `locations`:
+    rig's design geometry in `denali_pipe.core.geometry`, for gantry `locations`:
     what a perfect calibration would give. For tests and benchmarks that run
     without the pose stage."""
     from denali_pipe.poses.calibrate import sensor_mount

@@ -28,7 +28,7 @@ from types import ModuleType
 
 import numpy as np
 
-from denali_pipe.seeds import derive_seed
+from denali_pipe.core.seeds import derive_seed
 from denali_pipe.twin.illumination import check_renderer
 from denali_pipe.twin.layout import TwinScene
 from denali_pipe.twin.scene import transient_scene

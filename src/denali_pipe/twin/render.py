@@ -34,11 +34,11 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from denali_pipe import geometry as geo
-from denali_pipe.atomic import atomic_dir
-from denali_pipe.meshes import object_mesh
-from denali_pipe.objects import ObjectSpec
-from denali_pipe.seeds import derive_seed
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.atomic import atomic_dir
+from denali_pipe.core.meshes import object_mesh
+from denali_pipe.core.objects import ObjectSpec
+from denali_pipe.core.seeds import derive_seed
 from denali_pipe.twin.layout import TwinScene, load_calibration, material_of, twin_scene
 
 log = logging.getLogger(__name__)

@@ -30,8 +30,8 @@ from types import ModuleType
 
 import numpy as np
 
-from denali_pipe import geometry as geo
-from denali_pipe.geometry import Camera, Pose, Rect
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.geometry import Camera, Pose, Rect
 from denali_pipe.rig.frames import FLOOR_Z, TAG_BLACK, TAG_WHITE, tag_texture
 from denali_pipe.twin.layout import Calibration, TwinScene
 

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from denali_pipe.capture_sets import CaptureSet, select_objects
-from denali_pipe.objects import ObjectSpec
-from denali_pipe.seeds import rng_for
+from denali_pipe.core.capture_sets import CaptureSet, select_objects
+from denali_pipe.core.objects import ObjectSpec
+from denali_pipe.core.seeds import rng_for
 
 
 def twin_pairs(catalogue: dict[str, ObjectSpec], config: dict) -> list[tuple[str, str]]:

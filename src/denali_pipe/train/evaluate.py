@@ -23,11 +23,11 @@ import pandas as pd
 import torch
 from torch import nn
 
-from denali_pipe.cells import Cell
-from denali_pipe.preprocess import normalise
-from denali_pipe.registry import build
-from denali_pipe.saved_cell import SavedCell
-from denali_pipe.train import EVAL_BATCH, SIZE_CLASSES, Hyper, infer, task_metrics
+from denali_pipe.preprocess.histograms import normalise
+from denali_pipe.train.cells import Cell
+from denali_pipe.train.registry import build
+from denali_pipe.train.saved_cell import SavedCell
+from denali_pipe.train.training import EVAL_BATCH, SIZE_CLASSES, Hyper, infer, task_metrics
 
 
 @dataclass(frozen=True)

@@ -18,9 +18,9 @@ import numpy as np
 import pandas as pd
 import zarr
 
-from denali_pipe.atomic import atomic_dir, atomic_file
+from denali_pipe.core.atomic import atomic_dir, atomic_file
+from denali_pipe.core.objects import VARIANTS, ObjectSpec
 from denali_pipe.io.features import read_features
-from denali_pipe.objects import VARIANTS, ObjectSpec
 
 SAMPLE_COLUMNS = ("set", "object", "class", "type", "size", "light", "location", "repeat", "x", "y")
 

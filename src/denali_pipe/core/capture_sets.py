@@ -5,8 +5,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from denali_pipe.geometry import RESOLUTIONS
-from denali_pipe.objects import BACKGROUND_SIZE, BACKGROUNDS, ObjectSpec
+from denali_pipe.core.geometry import RESOLUTIONS
+from denali_pipe.core.objects import BACKGROUND_SIZE, BACKGROUNDS, ObjectSpec
 
 LIGHTINGS = ("lighton", "lightoff")
 FOLDER_SUFFIX = "_NLOSdata"

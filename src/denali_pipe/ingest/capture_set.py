@@ -45,13 +45,13 @@ import cv2
 import numpy as np
 import pandas as pd
 
-from denali_pipe import geometry as geo
-from denali_pipe.capture_sets import LIGHTINGS, PICKLE_SUFFIX, CaptureSet, parse_set_name
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.capture_sets import LIGHTINGS, PICKLE_SUFFIX, CaptureSet, parse_set_name
+from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.io.pickle_stream import CAMERA_RECORDS, iter_records
 from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE, histogram_files, location_span
 from denali_pipe.io.store import StoreWriter, frame_spec
 from denali_pipe.io.tree import misnamed_reason
-from denali_pipe.objects import ObjectSpec
 
 BACKGROUND_CLASS = "none"
 BACKGROUND_TYPE = "background"

@@ -20,10 +20,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from denali_pipe.cells import ALL
+from denali_pipe.core.geometry import gantry_row_col
 from denali_pipe.experiments.jitter import CONDITION_PATTERN as JITTER_PATTERN
 from denali_pipe.experiments.jitter import centre_zone, jitter, jitter_fwhm
-from denali_pipe.geometry import gantry_row_col
+from denali_pipe.train.cells import ALL
 
 if TYPE_CHECKING:
     # annotations only: every `denali` verb's parser imports this module for

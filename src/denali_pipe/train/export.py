@@ -21,10 +21,10 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from denali_pipe.atomic import atomic_file
-from denali_pipe.evaluate import TrainedCell
-from denali_pipe.preprocess import CropWindow
-from denali_pipe.saved_cell import SavedCell
+from denali_pipe.core.atomic import atomic_file
+from denali_pipe.preprocess.histograms import CropWindow
+from denali_pipe.train.evaluate import TrainedCell
+from denali_pipe.train.saved_cell import SavedCell
 
 FORMAT = "denali-pipe export"
 VERSION = 1

@@ -23,7 +23,7 @@ import math
 import torch
 from torch import nn
 
-from denali_pipe.registry import N_LOCATION_OUTPUTS
+from denali_pipe.train.registry import N_LOCATION_OUTPUTS
 
 DROPOUT = 0.1
 

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import yaml
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 
 TERMS = ("const", "hist", "frames", "tracking", "frame", "samples")
 

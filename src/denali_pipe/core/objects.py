@@ -72,7 +72,7 @@ MATERIALS = {
     "manila": Material(rho_diffuse=0.7, rho_retro=0.0),
 }
 
-_REPO_CONFIG = Path(__file__).resolve().parents[2] / "config"
+_REPO_CONFIG = Path(__file__).resolve().parents[3] / "config"
 SCHEMA_NAME = "objects.schema.yaml"
 COLUMNS = ("name", "class", "type", "sizes", "variant", "material", "mesh")
 

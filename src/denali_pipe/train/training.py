@@ -33,14 +33,14 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from denali_pipe import metrics as M
-from denali_pipe.cell_metrics import CellMetrics
-from denali_pipe.cells import PRECISIONS, PROTOCOLS, TASKS, Cell
-from denali_pipe.models import forward_flops, n_params
-from denali_pipe.preprocess import normalise
-from denali_pipe.registry import build
-from denali_pipe.saved_cell import SavedCell
-from denali_pipe.splits import Split, make_split, validation_split
+from denali_pipe.preprocess.histograms import normalise
+from denali_pipe.train import metrics as M
+from denali_pipe.train.cell_metrics import CellMetrics
+from denali_pipe.train.cells import PRECISIONS, PROTOCOLS, TASKS, Cell
+from denali_pipe.train.models import forward_flops, n_params
+from denali_pipe.train.registry import build
+from denali_pipe.train.saved_cell import SavedCell
+from denali_pipe.train.splits import Split, make_split, validation_split
 
 log = logging.getLogger(__name__)
 

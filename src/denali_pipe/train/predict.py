@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from denali_pipe.evaluate import TrainedCell, predict
 from denali_pipe.io.pickle_stream import iter_records
 from denali_pipe.io.release import histogram_files
-from denali_pipe.preprocess import CropWindow, background_means, preprocess
+from denali_pipe.preprocess.histograms import CropWindow, background_means, preprocess
+from denali_pipe.train.evaluate import TrainedCell, predict
 
 BINS = 128  # the sensor's histogram length
 ZONES = (3, 8)  # zones per side of the 3x3 and 8x8 modes

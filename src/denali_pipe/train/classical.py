@@ -16,10 +16,10 @@ import numpy as np
 import pandas as pd
 from sklearn.linear_model import LogisticRegression, Ridge
 
-from denali_pipe.cell_metrics import CellMetrics
-from denali_pipe.cells import Cell
-from denali_pipe.preprocess import normalise
-from denali_pipe.train import Result, baseline_metrics, metric_rows, partition, selection_key, targets, task_metrics
+from denali_pipe.preprocess.histograms import normalise
+from denali_pipe.train.cell_metrics import CellMetrics
+from denali_pipe.train.cells import Cell
+from denali_pipe.train.training import Result, baseline_metrics, metric_rows, partition, selection_key, targets, task_metrics
 
 # Ridge alpha / inverse logistic C, on z-scored log histograms.
 REGULARISATION = (0.1, 1.0, 10.0, 100.0)

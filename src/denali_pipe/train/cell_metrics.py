@@ -13,7 +13,7 @@ import json
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-from denali_pipe.cells import Cell
+from denali_pipe.train.cells import Cell
 
 METRICS_FILE = "metrics.json"  # in the cell's run folder
 

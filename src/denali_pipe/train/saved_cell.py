@@ -26,7 +26,7 @@ from pathlib import Path
 
 import torch
 
-from denali_pipe.cells import Cell
+from denali_pipe.train.cells import Cell
 
 MODEL_FILE = "model.pt"  # in the cell's run folder
 FORMAT = "denali-pipe cell"

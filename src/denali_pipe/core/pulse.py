@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import log_ndtr, ndtr
 
-from denali_pipe import geometry as geo
+from denali_pipe.core import geometry as geo
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from denali_pipe.cells import SPLITS
+from denali_pipe.train.cells import SPLITS
 
 TEST_FRACTION = 0.3
 TRAIN_SIZE, TEST_SIZE = "4inch", "8inch"

@@ -22,7 +22,7 @@ import trimesh
 from shapely import affinity
 from shapely.geometry import MultiPolygon, Point, Polygon, box
 
-from denali_pipe.objects import BASE_SHAPES, BOTTOM_Y, ITALIC_SHEAR_DEG, SIZES, THICKNESS, ObjectSpec, class_type
+from denali_pipe.core.objects import BASE_SHAPES, BOTTOM_Y, ITALIC_SHEAR_DEG, SIZES, THICKNESS, ObjectSpec, class_type
 
 # --- procedural outlines ------------------------------------------------------------
 

@@ -11,7 +11,7 @@ The module maps a float32 batch (B, n, n, T), normalised as the task's
 `norm` setting says, to (B, n_outputs): for location x, y in metres
 (n_outputs = 2), for shape and size logits over the classes (n_outputs =
 their count; size: 4inch, 8inch). The paper's four are registered the same
-way (their factories are in `denali_pipe.models`).
+way (their factories are in `denali_pipe.train.models`).
 
 This module imports no torch at load, so that the workflow can check the
 registry when it builds the DAG; `build` imports what it needs.
@@ -26,7 +26,7 @@ import re
 import sys
 from collections.abc import Callable
 
-from denali_pipe.cells import LINEAR, TASKS
+from denali_pipe.train.cells import LINEAR, TASKS
 
 N_LOCATION_OUTPUTS = 2  # x, y in metres
 N_SIZE_CLASSES = 2  # 4inch, 8inch

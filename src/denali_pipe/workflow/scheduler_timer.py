@@ -41,5 +41,5 @@ def keep_one_reevaluation_timer() -> None:
     installed Snakemake no longer has the method, so a version bump cannot
     drop the fix in silence."""
     if not callable(getattr(JobScheduler, PATCHED, None)):
-        raise RuntimeError(f"snakemake's JobScheduler has no {PATCHED}: check denali_pipe/scheduler_timer.py against the installed snakemake")
+        raise RuntimeError(f"snakemake's JobScheduler has no {PATCHED}: check denali_pipe/workflow/scheduler_timer.py against the installed snakemake")
     setattr(JobScheduler, PATCHED, _schedule_one_reevaluation)

@@ -46,10 +46,10 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import minimize_scalar, nnls
 
-from denali_pipe import geometry as geo
-from denali_pipe.atomic import atomic_file
+from denali_pipe.core import geometry as geo
+from denali_pipe.core.atomic import atomic_file
 from denali_pipe.io.features import read_features
-from denali_pipe.splits import Split, held_out_groups
+from denali_pipe.train.splits import Split, held_out_groups
 from denali_pipe.twin.render import read_twin
 
 log = logging.getLogger(__name__)

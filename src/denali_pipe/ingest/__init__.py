@@ -1,0 +1,1 @@
+"""Ingestion (rules/ingest.smk): one raw capture set, release layout or pickle stream, into its Zarr store and index rows."""

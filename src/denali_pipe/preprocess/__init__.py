@@ -1,0 +1,1 @@
+"""Preprocessing (rules/preprocess.smk): temporal alignment, background subtraction, cropping and normalisation of histograms."""

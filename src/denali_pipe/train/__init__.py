@@ -1,0 +1,1 @@
+"""The benchmark stack behind rules/train.smk: the cells' vocabulary (`cells`), the model registry and models, splits, the dataset, the one training loop, metrics, saved cells, prediction and export."""
