@@ -24,11 +24,13 @@ test: setup lint
 	python -m pytest -n auto --dist loadfile
 
 # The style holds without anyone policing it: ruff (lint, format) on the
-# Python, snakefmt on the workflow; settings in pyproject.toml.
+# Python, snakefmt on the workflow, import-linter's layer contracts on the
+# package; settings in pyproject.toml.
 lint: setup
 	ruff check src tests scripts examples
 	ruff format --check src tests scripts examples
 	snakefmt --check Snakefile rules
+	lint-imports
 
 # The capture explorer over results/ (what `make run` built, or any run's):
 # http://127.0.0.1:8050 (PORT=..., HOST=... to change).

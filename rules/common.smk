@@ -15,7 +15,7 @@ from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, backgrou
 from denali_pipe.train.cells import LINEAR, SPLITS, TASKS, is_ill_posed, uses_gpu
 from denali_pipe.workflow.costs import combine, cost_model, frame_pixels, gpu_speedup, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
 from denali_pipe.train.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
-from denali_pipe.experiments.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
+from denali_pipe.train.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
 from denali_pipe.core.geometry import N_BINS, N_LOCATIONS, RESOLUTIONS, select_locations
 from denali_pipe.io.tree import survey_tree
 from denali_pipe.core.objects import BACKGROUNDS, VARIANTS, load_catalogue

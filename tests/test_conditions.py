@@ -10,7 +10,6 @@ import pytest
 
 from denali_pipe.cli import main
 from denali_pipe.core import geometry as geo
-from denali_pipe.experiments.jitter import centre_zone, jitter
 from denali_pipe.train.conditions import (
     ALL,
     ATTRIBUTES,
@@ -24,6 +23,7 @@ from denali_pipe.train.conditions import (
     table_conditions,
 )
 from denali_pipe.train.dataset import write_dataset
+from denali_pipe.train.jitter import centre_zone, jitter
 
 OBJECTS = {"1": ("1", "number"), "7": ("7", "number"), "A": ("A", "letter"), "circle": ("circle", "shape")}
 

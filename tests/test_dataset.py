@@ -5,8 +5,7 @@ import pandas as pd
 import pytest
 
 from denali_pipe.core.capture_sets import parse_set_name
-from denali_pipe.io.features import read_features, write_features
-from denali_pipe.preprocess.histograms import Features
+from denali_pipe.io.features import Features, read_features, write_features
 from denali_pipe.train.dataset import build_dataset, location_labels, read_dataset, write_dataset
 
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from denali_pipe.core import geometry as g
-from denali_pipe.rig.frames import frame_tags, render_frame, tag_texture
+from denali_pipe.core.tags import tag_texture
+from denali_pipe.rig.frames import frame_tags, render_frame
 
 pyapriltags = pytest.importorskip("pyapriltags")
 

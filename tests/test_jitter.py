@@ -9,7 +9,8 @@ import pytest
 from scipy.stats import norm
 
 from denali_pipe.core.geometry import BIN_WIDTH_PS
-from denali_pipe.experiments.jitter import FWHM_PER_SIGMA, centre_zone, jitter, jitter_condition, jitter_curve, jitter_fwhm, jitter_kernel
+from denali_pipe.experiments.jitter import jitter_curve
+from denali_pipe.train.jitter import FWHM_PER_SIGMA, centre_zone, jitter, jitter_condition, jitter_fwhm, jitter_kernel
 
 
 def test_bin_width_is_the_time_axis_of_3_128_m_optical_path():

@@ -78,7 +78,9 @@ def test_a_wrong_entry_is_refused_naming_its_key(models, benchmark, message):
 
 
 def test_a_factory_that_does_not_resolve_or_build_names_its_key():
-    with pytest.raises(ValueError, match=r"train\.models\.net\.factory 'denali_pipe\.train\.models:resnet': module 'denali_pipe\.train\.models' has no 'resnet'"):
+    with pytest.raises(
+        ValueError, match=r"train\.models\.net\.factory 'denali_pipe\.train\.models:resnet': module 'denali_pipe\.train\.models' has no 'resnet'"
+    ):
         load_factory("net", "denali_pipe.train.models:resnet")
     with pytest.raises(ValueError, match=r"train\.models\.net\.factory 'denali_pipe\.train\.models:DROPOUT': 'DROPOUT' is not callable"):
         load_factory("net", "denali_pipe.train.models:DROPOUT")

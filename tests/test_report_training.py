@@ -3,11 +3,10 @@
 import pandas as pd
 import pytest
 
-from denali_pipe.experiments.jitter import jitter_condition, jitter_curve
+from denali_pipe.experiments.jitter import jitter_curve
 from denali_pipe.report.condition_table import condition_table, write_condition_table
 from denali_pipe.report.jitter import plot_jitter
 from denali_pipe.report.paper import CONDITION_TABLES, TABLE5, TABLE10
-from denali_pipe.report.runs import load_runs
 from denali_pipe.report.speed_vs_accuracy import pareto, write_speed_vs_accuracy
 from denali_pipe.report.table2 import write_table2
 from denali_pipe.report.table5 import write_table5
@@ -16,7 +15,9 @@ from denali_pipe.report.training_curves import write_training_curves
 from denali_pipe.train.cell_metrics import CellMetrics
 from denali_pipe.train.cells import SPLITS, TASKS, Cell, is_ill_posed
 from denali_pipe.train.conditions import CONDITION_GROUPS, TABLES
+from denali_pipe.train.jitter import jitter_condition
 from denali_pipe.train.models import PAPER_MODELS
+from denali_pipe.train.runs import load_runs
 
 MODELS = tuple(PAPER_MODELS)
 REG = {"mse": 0.0025, "rmse": 0.05, "mae": 0.04}

@@ -12,8 +12,7 @@ import pytest
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.capture_sets import parse_set_name
-from denali_pipe.io.features import write_features
-from denali_pipe.preprocess.histograms import Features
+from denali_pipe.io.features import Features, write_features
 from denali_pipe.transforms.sim_to_real import (
     CENTRE_ZONE,
     FIDELITIES,

@@ -12,7 +12,7 @@ log = logging.getLogger("denali")
 def cmd_jitter(args: argparse.Namespace) -> None:
     from denali_pipe.experiments.jitter import jitter_curve
     from denali_pipe.report.jitter import plot_jitter
-    from denali_pipe.report.runs import load_runs, protocol_of
+    from denali_pipe.train.runs import load_runs, protocol_of
 
     runs = load_runs([Path(p) for p in args.runs])
     curve = jitter_curve(runs)

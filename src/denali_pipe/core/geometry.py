@@ -125,6 +125,10 @@ TABLES = {
     15: Rect(centre=_v(1.13, 0.214, 0.0), u=_v(1, 0, 0), v=_v(0, 1, 0), size=(0.82, 1.524)),
 }
 
+# Table height above the floor (m): a standard lab table. The floor is only a
+# backdrop for pixels that miss the tables and the wall.
+FLOOR_Z = -0.76
+
 # --- AprilTags --------------------------------------------------------------------
 
 TAG_FAMILY = "tag36h11"

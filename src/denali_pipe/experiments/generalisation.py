@@ -19,7 +19,7 @@ size, lighting and gantry location.
 
 Each figure's CSV is one long table; `panel` says which part of the figure a
 row belongs to:
-- `score`: task, metric (`report.runs.HEADLINE`: RMSE in m, Top-1), data
+- `score`: task, metric (`train.runs.HEADLINE`: RMSE in m, Top-1), data
   (`BASE_TEST`, the variant's sets, or `ANY_DATA` for chance), predictor
   (`MODEL`, `MEAN_BASELINE`, `CHANCE`), value (mean over seeds), std (ddof 1;
   0 for one seed), n_seeds, n_samples (per seed);
@@ -35,11 +35,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from denali_pipe.report.figure import plt, save_figure
-from denali_pipe.report.runs import HEADLINE
+from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.train.cell_metrics import CellMetrics
 from denali_pipe.train.cells import TASKS
 from denali_pipe.train.evaluate import Evaluation
+from denali_pipe.train.runs import HEADLINE
 
 BASE_TEST = "base test split"
 ANY_DATA = "any"  # the `data` of chance, which does not depend on the samples

@@ -1,102 +1,24 @@
 """The timing-jitter sweep (paper Sec 5.2, supplement 11.6): how the NLOS
-tasks degrade as the LiDAR's timing gets worse.
-
-The real histograms are the best case: the background-subtracted 3x3
-centre-zone histograms with lights on, blurred along time by a normalised
-discrete Gaussian of full width at half maximum F ps. One 1D CNN is trained
-per FWHM, task and seed, as training cells of condition `jitter<F>ps`
-(conditions.py selects the samples and calls `jitter` here; `jitter0ps` is
-the unjittered original); `jitter_curve` gathers them into the sweep's table.
-
-The kernel is bin-integrated: tap j is the probability that a Gaussian
-timing error moves a count from the centre of its bin into the bin j bins
-away, Phi((j + 1/2) / sigma) - Phi((j - 1/2) / sigma), sigma = FWHM /
-(2 sqrt(2 ln 2)) in bins. Sampling the Gaussian at bin centres instead
-collapses to a delta below a bin: at 50 ps FWHM (sigma 0.27 bins) its
-neighbour taps are 0.1 %, here 3.3 %, so sub-bin widths still blur. The
-bin width is geometry.BIN_WIDTH_PS (3/128 m of optical path, 78.2 ps).
+tasks degrade as the LiDAR's timing gets worse. One 1D CNN is trained per
+FWHM, task and seed, as training cells of condition `jitter<F>ps`
+(train/jitter.py blurs the histograms); `jitter_curve` gathers them into
+the sweep's table.
 """
 
 from __future__ import annotations
 
-import math
-import re
-from typing import TYPE_CHECKING
+import pandas as pd
 
-import numpy as np
-
-from denali_pipe.core.geometry import BIN_WIDTH_PS, RESOLUTIONS
-
-if TYPE_CHECKING:
-    import pandas as pd
-
-RESOLUTION = "3x3"  # the captures whose centre zone the sweep blurs
-FWHM_PER_SIGMA = 2.0 * math.sqrt(2.0 * math.log(2.0))
-# Taps reach this many sigma each side: the Gaussian mass beyond is < 1e-4.
-KERNEL_HALF_WIDTH_SIGMAS = 4.0
-_CONDITION = re.compile(r"jitter(\d+)ps")
-CONDITION_PATTERN = _CONDITION.pattern
-
-
-def jitter_condition(fwhm_ps: int) -> str:
-    """The cell condition of one FWHM (ps): `jitter<F>ps`."""
-    return f"jitter{int(fwhm_ps)}ps"
-
-
-def jitter_fwhm(condition: str) -> int | None:
-    """The FWHM (ps) a `jitter<F>ps` condition names; None for any other."""
-    m = _CONDITION.fullmatch(condition)
-    return None if m is None else int(m[1])
-
-
-def jitter_kernel(fwhm_ps: float) -> np.ndarray:
-    """(2K + 1,) float64 taps summing to one, centred on tap K: the
-    bin-integrated Gaussian of FWHM `fwhm_ps` (module docstring), truncated
-    at KERNEL_HALF_WIDTH_SIGMAS; [1.0] for FWHM 0."""
-    if fwhm_ps < 0:
-        raise ValueError(f"jitter FWHM must be >= 0 ps, got {fwhm_ps}")
-    if fwhm_ps == 0:
-        return np.ones(1)
-    sigma = fwhm_ps / BIN_WIDTH_PS / FWHM_PER_SIGMA
-    half = max(1, math.ceil(KERNEL_HALF_WIDTH_SIGMAS * sigma))
-    edges = np.array([_normal_cdf((j + 0.5) / sigma) for j in range(-half - 1, half + 1)])
-    taps = np.diff(edges)
-    return taps / taps.sum()
-
-
-def _normal_cdf(z: float) -> float:
-    return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
-
-
-def jitter(x: np.ndarray, fwhm_ps: float) -> np.ndarray:
-    """x (..., T) counts blurred along the last (time) axis by `jitter_kernel`:
-    a linear convolution, zero beyond the ends, the same T bins kept; float32."""
-    taps = jitter_kernel(fwhm_ps)
-    half, bins = len(taps) // 2, x.shape[-1]
-    padded = np.pad(np.asarray(x, np.float64), [(0, 0)] * (x.ndim - 1) + [(half, half)])
-    # the taps are symmetric, so this sliding sum is the convolution
-    return sum(t * padded[..., i : i + bins] for i, t in enumerate(taps)).astype(np.float32)
-
-
-def centre_zone(x: np.ndarray) -> np.ndarray:
-    """(N, 3, 3, T) -> (N, 1, 1, T): the centre zone of RESOLUTION histograms."""
-    n = RESOLUTIONS[RESOLUTION]
-    if x.ndim != 4 or x.shape[1:3] != (n, n):
-        raise ValueError(f"the jitter sweep takes {RESOLUTION} histograms (N, {n}, {n}, T); got {x.shape}")
-    return x[:, n // 2 : n // 2 + 1, n // 2 : n // 2 + 1, :]
+from denali_pipe.core.geometry import BIN_WIDTH_PS
+from denali_pipe.train.jitter import jitter_fwhm
+from denali_pipe.train.runs import METRICS, seed_stats
 
 
 def jitter_curve(runs: pd.DataFrame) -> pd.DataFrame:
-    """The sweep's table from `report.runs.load_runs` rows of jitter cells:
+    """The sweep's table from `train.runs.load_runs` rows of jitter cells:
     one row per task, metric (the paper's table metrics) and FWHM, with
     fwhm_bins, the mean and std over seeds, n_seeds and the trivial
     predictor's mean (training mean position or majority class)."""
-    # imported here: `conditions` (and through it every verb's parser) imports
-    # this module, and pandas costs each job ~0.3 CPU-s
-    import pandas as pd
-
-    from denali_pipe.report.runs import METRICS, seed_stats
-
     fwhm = runs["condition"].map(jitter_fwhm)
     if fwhm.isna().any():
         raise ValueError(f"not jitter cells: conditions {sorted(set(runs['condition'][fwhm.isna()]))}")

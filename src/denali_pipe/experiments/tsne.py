@@ -35,8 +35,8 @@ from sklearn.metrics import silhouette_score
 from sklearn.model_selection import StratifiedKFold, cross_val_score
 from sklearn.neighbors import KNeighborsClassifier
 
+from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.core.seeds import derive_seed, rng_for
-from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.train.cell_metrics import METRICS_FILE, CellMetrics
 from denali_pipe.train.evaluate import embed, load_cell
 from denali_pipe.train.training import partition, targets

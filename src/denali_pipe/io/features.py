@@ -8,6 +8,7 @@ the set's fields, `crop_start` (first kept bin of the original histogram),
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,9 +16,22 @@ import zarr
 
 from denali_pipe.core.atomic import atomic_dir
 from denali_pipe.core.capture_sets import CaptureSet, parse_set_name
-from denali_pipe.preprocess.histograms import Features
 
 FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Features:
+    """One set's preprocessed histograms.
+
+    values: (L, R, n, n, B - crop_start) float32 background-subtracted counts;
+    locations: (L,) gantry locations; shifts: (L, R) whole-bin alignment
+    shifts applied; crop_start: first kept bin of the original 128."""
+
+    values: np.ndarray
+    locations: np.ndarray
+    shifts: np.ndarray
+    crop_start: int
 
 
 def write_features(path: Path, cs: CaptureSet, features: Features, background: str) -> None:

@@ -42,6 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from denali_pipe.io.features import Features
+
 # After subtraction the direct return cancels in expectation and leaves its
 # shot noise, whose variance is its counts. A zone's return has ended where
 # its excess over the floor is at most the floor itself, i.e. the noise there
@@ -240,20 +242,6 @@ def crop_window(backgrounds: list[np.ndarray], lead_bins: np.ndarray, fraction: 
     ends = np.where((ends >= 0) & (onset >= 0), np.minimum(ends, signal), ends)
     start = int(ends[ends >= 0].min())
     return CropWindow(start, np.maximum(ends, start).reshape(n, n))
-
-
-@dataclass(frozen=True)
-class Features:
-    """One set's preprocessed histograms.
-
-    values: (L, R, n, n, B - crop_start) float32 background-subtracted counts;
-    locations: (L,) gantry locations; shifts: (L, R) whole-bin alignment
-    shifts applied; crop_start: first kept bin of the original 128."""
-
-    values: np.ndarray
-    locations: np.ndarray
-    shifts: np.ndarray
-    crop_start: int
 
 
 def preprocess(hist: np.ndarray, locations: np.ndarray, background: np.ndarray, background_locations: np.ndarray, window: CropWindow) -> Features:

@@ -12,8 +12,8 @@ import pandas as pd
 from denali_pipe.core.atomic import atomic_file
 from denali_pipe.core.geometry import RESOLUTIONS
 from denali_pipe.report.paper import CONDITION_TABLES, CONDITION_TABLES_RESOLUTION
-from denali_pipe.report.runs import METRICS, NA, load_runs, protocol_of, seed_stats
 from denali_pipe.train.conditions import GROUP_OF, table_conditions
+from denali_pipe.train.runs import METRICS, NA, load_runs, protocol_of, seed_stats
 
 
 def condition_table(runs: pd.DataFrame, table: str, groups: list[str]) -> pd.DataFrame:

@@ -19,8 +19,8 @@ import numpy as np
 import pandas as pd
 
 from denali_pipe.core import geometry as geo
+from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.io.store import open_set
-from denali_pipe.report.figure import plt, save_figure
 
 COMPONENT_COLOURS = {"table": "tab:brown", "relay_wall": "tab:blue", "lidar": "tab:green", "object": "tab:red", "unknown": "tab:gray"}
 AXIS_LENGTH_M = geo.TAG_SIZE

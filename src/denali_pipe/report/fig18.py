@@ -24,12 +24,12 @@ import pandas as pd
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core import pulse
+from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.core.meshes import object_mesh
 from denali_pipe.core.objects import spec_from_dict
 from denali_pipe.core.seeds import derive_seed, rng_for
 from denali_pipe.io.store import CaptureStore, open_set
 from denali_pipe.preprocess.histograms import background_means, subtract_background
-from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.twin.calibrate import read_calibration
 from denali_pipe.twin.layout import Calibration, load_calibration, material_of, twin_scene
 from denali_pipe.twin.render import Twin, read_twin

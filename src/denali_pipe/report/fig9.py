@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE, PANELS
-from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.transforms.sim_to_real import FIDELITIES
 
 METRICS = ("rmse", "mse", "mae", "rmse_euclidean")

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.core.geometry import BIN_WIDTH_PS
-from denali_pipe.report.figure import plt, save_figure
 
 TASK_TITLES = {"location": "location (lower is better)", "shape": "shape (higher is better)", "size": "size (higher is better)"}
 Y_LABELS = {"location": "test error (m)", "shape": "test score", "size": "test score"}

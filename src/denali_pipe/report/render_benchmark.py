@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import FormatStrFormatter
 
-from denali_pipe.report.figure import plt, save_figure
+from denali_pipe.core.figure import plt, save_figure
 
 
 def plot_render_benchmark(summary: pd.DataFrame, out_png: Path) -> None:

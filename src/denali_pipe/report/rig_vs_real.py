@@ -24,8 +24,8 @@ import numpy as np
 import pandas as pd
 
 from denali_pipe.core import geometry as geo
+from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.io.store import open_set
-from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.report.paper import REAL_CENTRE_ZONE, REAL_ZONE_MEANS
 from denali_pipe.rig.measure import measure
 

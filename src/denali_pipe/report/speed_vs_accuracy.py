@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from denali_pipe.report.figure import plt, save_figure
-from denali_pipe.report.runs import HEADLINE, load_runs, protocol_of, seed_stats
+from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.train.cells import TASKS
+from denali_pipe.train.runs import HEADLINE, load_runs, protocol_of, seed_stats
 
 LABELS = {"rmse": "test RMSE (m), lower is better", "top1": "test Top-1, higher is better"}
 

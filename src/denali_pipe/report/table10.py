@@ -15,8 +15,8 @@ import pandas as pd
 
 from denali_pipe.core.atomic import atomic_file
 from denali_pipe.report.paper import TABLE10, TABLE10_COLUMNS
-from denali_pipe.report.runs import NA, left_out_note, load_runs, protocol_of, seed_stats
 from denali_pipe.train.cells import TASKS
+from denali_pipe.train.runs import NA, left_out_note, load_runs, protocol_of, seed_stats
 
 
 def write_table10(metrics_paths: list[Path], out: Path, left_out: dict[str, str] | None = None) -> None:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from denali_pipe.core.atomic import atomic_file
 from denali_pipe.report.paper import TABLE2
-from denali_pipe.report.runs import left_out_note, load_runs, metric_table, protocol_of
+from denali_pipe.train.runs import left_out_note, load_runs, metric_table, protocol_of
 
 
 def write_table2(metrics_paths: list[Path], out: Path, left_out: dict[str, str] | None = None) -> None:

@@ -7,8 +7,8 @@ from pathlib import Path
 
 from denali_pipe.core.atomic import atomic_file
 from denali_pipe.report.paper import TABLE5
-from denali_pipe.report.runs import load_runs, metric_table, protocol_of
 from denali_pipe.train.cells import SPLITS
+from denali_pipe.train.runs import load_runs, metric_table, protocol_of
 
 
 def write_table5(metrics_paths: list[Path], out: Path) -> None:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from denali_pipe.report.figure import plt, save_figure
+from denali_pipe.core.figure import plt, save_figure
 
 PANELS = {"location": ("mse", "mae"), "shape": ("top1", "top5", "f1", "precision", "recall")}
 LABELS = {"mse": "MSE (m$^2$)", "mae": "MAE (m)", "top1": "Top-1", "top5": "Top-5", "f1": "macro F1", "precision": "macro precision", "recall": "macro recall"}

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from denali_pipe.report.figure import plt, save_figure
+from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.twin.calibrate import GRID, Problem, Result
 
 

@@ -18,9 +18,9 @@ import numpy as np
 import pandas as pd
 
 from denali_pipe.core import geometry as geo
+from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.core.objects import BOTTOM_Y, SIZES
 from denali_pipe.io.store import open_set
-from denali_pipe.report.figure import plt, save_figure
 from denali_pipe.rig.histograms import wall_samples
 
 PULSE_MARGIN_BINS = (3, 8)  # jitter before, SPAD tail after the geometric window

@@ -33,14 +33,12 @@ import cv2
 import numpy as np
 
 from denali_pipe.core import geometry as g
-from denali_pipe.core.geometry import Camera, Pose
+from denali_pipe.core.geometry import FLOOR_Z, Camera, Pose
+from denali_pipe.core.tags import TAG_BLACK, TAG_WHITE, tag_texture
 from denali_pipe.rig.tracked_scene import TrackedScene, design_scene
 
 # --- scene appearance -----------------------------------------------------------
 
-# Table height above the floor (m): a standard lab table. The floor is only a
-# backdrop for pixels that miss the tables and the wall.
-FLOOR_Z = -0.76
 MAX_DEPTH_M = 10.0  # the depth camera reports 0 beyond this (no valid return)
 
 # Albedos, RGB (converted to BGR when writing). The table colour is the
@@ -49,8 +47,6 @@ TABLE_ALBEDO = {14: np.array([0.60, 0.50, 0.40]), 15: np.array([0.57, 0.48, 0.39
 WALL_RGB = np.array([0.88, 0.88, 0.86])
 FLOOR_RGB = np.array([0.22, 0.23, 0.25])
 BACKDROP_RADIANCE = np.array([0.06, 0.06, 0.07])  # dark room beyond 10 m / above the horizon
-TAG_WHITE = 0.85  # printed paper
-TAG_BLACK = 0.04  # printed toner
 
 # Lighting: two ceiling lights above the tables plus ambient fill. Irradiance
 # units are arbitrary; exposure normalises them (see _EXPOSURE_TARGET_GREY).
@@ -81,23 +77,8 @@ _SUPERSAMPLE = 8
 _MIN_TEXTURE_PX = 64
 _NEAR_M = 0.02  # tags closer than this to the camera plane are skipped
 
-_DICT = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
-
 
 # --- tag textures -----------------------------------------------------------------
-
-
-@lru_cache(maxsize=512)
-def tag_texture(tag_id: int, px: int) -> np.ndarray:
-    """The tag36h11 marker `tag_id` as a (px, px) uint8 greyscale image.
-
-    The black square (1-cell black border + 6x6 data cells) spans the whole
-    image: pixel (0, 0) is the tag's top-left (TL) corner. 0 = black, 255 =
-    white. Cached; the returned array is read-only.
-    """
-    img = cv2.aruco.generateImageMarker(_DICT, int(tag_id), int(px), borderBits=1)
-    img.setflags(write=False)
-    return img
 
 
 @lru_cache(maxsize=512)

@@ -1,6 +1,6 @@
 """What one training cell measured: the `metrics.json` of its run folder, one
 typed record that the writers (`train.run_cell`, `classical.run_linear`) and
-the readers (`report.runs`, `evaluate`) share.
+the readers (`train.runs`, `evaluate`) share.
 
 Networks fill the epoch fields (best_epoch, epochs_run, samples_seen, the
 time budget); the linear reference model fills `selected_regularisation`

@@ -10,7 +10,7 @@ DAG to leave ill-posed cells out. Light enough for the Snakefile to import.
   the samples with that attribute; location `front_quadrant` /
   `back_quadrant` (QUADRANTS).
 - `jitter<F>ps`: the timing-jitter sweep's light-on 3x3 centre-zone
-  histograms blurred by a Gaussian of FWHM F ps (experiments/jitter.py);
+  histograms blurred by a Gaussian of FWHM F ps (train/jitter.py);
   `jitter0ps` is the unjittered original.
 """
 
@@ -21,9 +21,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from denali_pipe.core.geometry import gantry_row_col
-from denali_pipe.experiments.jitter import CONDITION_PATTERN as JITTER_PATTERN
-from denali_pipe.experiments.jitter import centre_zone, jitter, jitter_fwhm
 from denali_pipe.train.cells import ALL
+from denali_pipe.train.jitter import CONDITION_PATTERN as JITTER_PATTERN
+from denali_pipe.train.jitter import centre_zone, jitter, jitter_fwhm
 
 if TYPE_CHECKING:
     # annotations only: every `denali` verb's parser imports this module for

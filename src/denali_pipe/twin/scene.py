@@ -31,8 +31,8 @@ from types import ModuleType
 import numpy as np
 
 from denali_pipe.core import geometry as geo
-from denali_pipe.core.geometry import Camera, Pose, Rect
-from denali_pipe.rig.frames import FLOOR_Z, TAG_BLACK, TAG_WHITE, tag_texture
+from denali_pipe.core.geometry import FLOOR_Z, Camera, Pose, Rect
+from denali_pipe.core.tags import TAG_BLACK, TAG_WHITE, tag_texture
 from denali_pipe.twin.layout import Calibration, TwinScene
 
 LASER_FOV_DEG = 0.2  # the reference twin's laser cone

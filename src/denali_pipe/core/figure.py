@@ -2,7 +2,7 @@
 
 Importing this module selects matplotlib's file-only Agg backend (jobs have
 no display), so figure modules import pyplot from here: `from
-denali_pipe.report.figure import plt, save_figure`.
+denali_pipe.core.figure import plt, save_figure`.
 """
 
 from __future__ import annotations
