@@ -327,8 +327,8 @@ def test_predict_and_export_a_tiny_capture_as_training_saw_it(tiny_run, tmp_path
         (shape.classes[i], pytest.approx(float(p[i]), abs=1e-5)) for i in np.argsort(-p)[:5]
     ]
     assert out["size"]["class"] in ("4inch", "8inch")
-    assert main(["export", str(runs[1]), str(tmp_path / "shape.pt")]) == 0
-    module, meta = load_export(tmp_path / "shape.pt")
+    assert main(["export", str(runs[1]), str(tmp_path / "shape.pt2")]) == 0
+    module, meta = load_export(tmp_path / "shape.pt2")
     with torch.no_grad():
         logits = module(torch.from_numpy(x[rows])).numpy()
     np.testing.assert_allclose(logits, predict(shape, x[rows]), rtol=1e-4, atol=1e-4)

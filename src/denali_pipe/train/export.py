@@ -1,20 +1,23 @@
-"""A trained cell as one TorchScript file for use outside the pipeline
-(`denali export`; docs/models.md).
+"""A trained cell as one file for use outside the pipeline (`denali export`;
+docs/models.md): a `torch.export` program (`.pt2`) or an ONNX model
+(`.onnx`), chosen by the output's suffix.
 
-The archive holds the network behind the cell's input normalisation, so it
+The file holds the network behind the cell's input normalisation, so it
 takes what the pipeline's features are: (B, n, n, T) float32
 background-subtracted, aligned, cropped counts (predict.capture_features),
-and gives what the cell gives: (B, 2) x, y in metres for location, (B, C)
-logits for shape and size. Beside the code, the archive's extra file
-`denali.json` (EXTRA_FILE) names the task, the classes in output order,
+any batch size B >= 1, and gives what the cell gives: (B, 2) x, y in metres
+for location, (B, C) logits for shape and size. Beside the program,
+`denali.json` (METADATA_KEY) names the task, the classes in output order,
 the input shape, the normalisation, the cell and its factory, and the crop
-window when given: read it with
-`torch.jit.load(path, _extra_files={"denali.json": ""})`.
+window when given: an extra file of the `.pt2` archive, a metadata entry of
+the ONNX model. `load_export` reads both.
 """
 
 from __future__ import annotations
 
 import json
+import logging
+import warnings
 from dataclasses import asdict
 from pathlib import Path
 
@@ -27,10 +30,14 @@ from denali_pipe.train.evaluate import TrainedCell
 from denali_pipe.train.saved_cell import SavedCell
 
 FORMAT = "denali-pipe export"
-VERSION = 1
-EXTRA_FILE = "denali.json"
-# preprocess.normalise's floor on sigma, kept so that the archive computes what the cell does
+VERSION = 2  # 1 was a TorchScript archive, deprecated in torch 2.13
+METADATA_KEY = "denali.json"
+FORMATS = (".pt2", ".onnx")
+# preprocess.normalise's floor on sigma, kept so that the file computes what the cell does
 MIN_SIGMA = 1e-6
+# ONNX opset: torch 2.13's exporter's own (torch.onnx._internal.exporter._constants.TORCHLIB_OPSET),
+# pinned so that an upgrade cannot change the files in silence
+ONNX_OPSET = 18
 
 
 class NormalisedModel(nn.Module):
@@ -70,29 +77,73 @@ def metadata(trained: TrainedCell, factory: str, window: CropWindow | None) -> d
 
 
 def export_cell(trained: TrainedCell, run_dir: Path, out: Path, window: CropWindow | None = None) -> dict:
-    """Trace the cell in `run_dir` (loaded as `trained`) behind its
-    normalisation and save it to `out` with its metadata; returns the metadata."""
+    """Export the cell in `run_dir` (loaded as `trained`) behind its
+    normalisation to `out` (`.pt2` or `.onnx`, FORMATS) with its metadata;
+    returns the metadata. ValueError naming `out` for another suffix."""
+    out = Path(out)
+    if out.suffix not in FORMATS:
+        raise ValueError(f"{out}: an export is a torch.export program (.pt2) or an ONNX model (.onnx), not {out.suffix or 'a file without suffix'}")
     meta = metadata(trained, SavedCell.load(run_dir).factory, window)
     wrapper = NormalisedModel(trained.model, trained.hyper.norm, trained.norm_stats).eval()
-    example = torch.zeros(2, *trained.input_shape)
-    with torch.no_grad():
-        traced = torch.jit.trace(wrapper, example)
-    with atomic_file(Path(out)) as tmp:
-        torch.jit.save(traced, str(tmp), _extra_files={EXTRA_FILE: json.dumps(meta, indent=1)})
+    example = (torch.zeros(2, *trained.input_shape),)
+    batch = ({0: torch.export.Dim("batch", min=1)},)
+    with atomic_file(out) as tmp, torch.no_grad():
+        if out.suffix == ".pt2":
+            program = torch.export.export(wrapper, example, dynamic_shapes=batch)
+            torch.export.save(program, str(tmp), extra_files={METADATA_KEY: json.dumps(meta, indent=1)})
+        else:
+            _export_onnx(wrapper, example, batch, tmp, meta)
     return meta
 
 
-def load_export(path: Path) -> tuple[torch.jit.ScriptModule, dict]:
-    """(the archive's module in eval mode, its metadata). ValueError naming the file when it is not an export."""
-    extra = {EXTRA_FILE: ""}
+def _export_onnx(wrapper: nn.Module, example: tuple, batch: tuple, path: Path, meta: dict) -> None:
+    import onnx
+
+    # torch 2.13's own decomposition pass deep-copies a pytree LeafSpec, which
+    # warns of a deprecation in torch itself, not in anything called here; and
+    # its registry logs at WARNING each torchvision operator it skips.
+    with warnings.catch_warnings(), _quiet("torch.onnx"):
+        warnings.filterwarnings("ignore", message=r"`isinstance\(treespec, LeafSpec\)` is deprecated", category=FutureWarning)
+        program = torch.onnx.export(wrapper, example, dynamo=True, dynamic_shapes=batch, opset_version=ONNX_OPSET, verbose=False)
+    model = program.model_proto
+    entry = model.metadata_props.add()
+    entry.key, entry.value = METADATA_KEY, json.dumps(meta, indent=1)
+    onnx.save_model(model, str(path))
+
+
+class _quiet:
+    """A logger raised to ERROR for the duration of a `with` block."""
+
+    def __init__(self, name: str):
+        self.logger = logging.getLogger(name)
+
+    def __enter__(self):
+        self.level = self.logger.level
+        self.logger.setLevel(logging.ERROR)
+
+    def __exit__(self, *exc):
+        self.logger.setLevel(self.level)
+
+
+def load_export(path: Path) -> tuple[nn.Module | None, dict]:
+    """(the `.pt2` program as a module, or None for `.onnx`, which runs in an
+    ONNX runtime; its metadata). ValueError naming the file when it is not an export."""
+    path = Path(path)
     try:
-        module = torch.jit.load(str(path), map_location="cpu", _extra_files=extra)
-    except (RuntimeError, ValueError) as e:
-        raise ValueError(f"{path}: not a denali-pipe export ({e})") from None
+        if path.suffix == ".onnx":
+            import onnx
+
+            props = {p.key: p.value for p in onnx.load_model(str(path), load_external_data=False).metadata_props}
+            module, raw = None, props.get(METADATA_KEY, "")
+        else:
+            extra = {METADATA_KEY: ""}
+            module, raw = torch.export.load(str(path), extra_files=extra).module(), extra[METADATA_KEY]
+    except Exception as e:  # noqa: BLE001 (each loader raises its own types on a foreign file)
+        raise ValueError(f"{path}: not a denali-pipe export ({type(e).__name__}: {e})") from None
     try:
-        meta = json.loads(extra[EXTRA_FILE])
+        meta = json.loads(raw)
     except ValueError:
         meta = None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise ValueError(f"{path}: a TorchScript file without denali-pipe's {EXTRA_FILE}")
-    return module.eval(), meta
+        raise ValueError(f"{path}: a {path.suffix} file without denali-pipe's {METADATA_KEY}")
+    return module, meta
