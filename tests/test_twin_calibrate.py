@@ -121,6 +121,10 @@ def test_file_round_trips_into_calibrated_twins(cal, catalogue, fitted, tmp_path
     assert f.material.lobe_width_deg == pytest.approx(phys["lobe_width_deg"]) and f.time_offset == pytest.approx(phys["time_offset"])
     doc = json.loads(path.read_text())
     assert set(doc["se"]) == set(doc["parameters"]) and np.shape(doc["interval"]["scale"]) == (3, 3, 2)
+    for k, v in doc["parameters"].items():  # every interval holds its estimate
+        lo, hi = np.moveaxis(np.asarray(doc["interval"][k]), -1, 0)
+        assert (lo <= np.asarray(v) + 1e-12).all() and (np.asarray(v) <= hi + 1e-12).all(), k
+    assert doc["not_identified"] == result.not_identified and doc["at_bound"] == result.at_bound
     # the calibrated twin: its 3x3 footprints are the fit's, a non-RR object stays Lambertian
     tw = f.twin_scene(cal, _mesh(catalogue), SETTINGS, 3, catalogue["generalization1white"])
     assert tw.material.kind == "lambertian" and tw.time_offset_opl > 0
@@ -190,3 +194,66 @@ def test_gains_are_never_negative():
     m = np.ones((4, 2, 5))
     problem = SimpleNamespace(y=np.stack([-m[:, 0], 2 * m[:, 1]], axis=1))
     assert C.Problem.gains(problem, m).tolist() == [0.0, 2.0]
+
+
+def _linear_problem(n=60, m=5, q=3, seed=0):
+    """Per-capture residuals r (n, m) and Jacobian (n, m, q) of the linear
+    least squares y = X theta + noise at its exact minimum, and X, y."""
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(n, m, q))
+    y = X @ np.array([1.0, -2.0, 0.5]) + rng.normal(0, 0.3, (n, m))
+    theta = np.linalg.lstsq(X.reshape(-1, q), y.ravel(), rcond=None)[0]
+    return y - X @ theta, -X, theta
+
+
+def test_one_step_deviations_do_not_depend_on_where_the_fit_stopped():
+    """A fit stopped short of the minimum (by 2 in every coordinate) gets the
+    same bootstrap deviations as the exact minimum: the full data's own step
+    is taken out, where uncentred every resample moved by it. Their spread is
+    the least-squares estimate's sampling spread."""
+    r, jac, _ = _linear_problem()
+    spans = np.full(3, 1e3)
+    at_min = C.one_step_deviations(r, jac, 400, np.random.default_rng(3), spans)
+    off = r - jac @ np.full(3, 2.0)  # residuals at theta + 2 (jac = -X)
+    stopped = C.one_step_deviations(off, jac, 400, np.random.default_rng(3), spans)
+    assert np.allclose(stopped, at_min, atol=1e-9)
+    assert np.abs(at_min.mean(axis=0)).max() < 0.2 * at_min.std(axis=0).min()
+    # the sandwich (heteroscedasticity-robust) SE of the estimate, which the pairs bootstrap estimates
+    X, e = -jac, r
+    bread = np.linalg.inv(np.einsum("nmp,nmq->pq", X, X))
+    g = np.einsum("nmp,nm->np", X, e)
+    sandwich = np.sqrt(np.diag(bread @ (g.T @ g) @ bread))
+    assert np.allclose(at_min.std(axis=0, ddof=1), sandwich, rtol=0.15)
+    # a deviation is capped at its coordinate's range, no tighter
+    assert np.abs(C.one_step_deviations(r, jac, 50, np.random.default_rng(3), np.full(3, 1e-3))).max() == pytest.approx(1e-3)
+
+
+def test_every_interval_holds_its_estimate_and_a_collapsed_one_is_flagged():
+    """The demo's failure: resamples that all sit on one side of the
+    estimate (its widths' [3.0, 3.0] about 4.14 deg) or that never move a
+    coordinate. Every interval holds its estimate; those coordinates are
+    named not identified, and a coordinate whose interval reaches past a
+    bound is named in at_bound."""
+    x = C.initial(FLOOD)
+    names = C.coordinate_names(FLOOD)
+    rng = np.random.default_rng(0)
+    boots = x + rng.normal(0, 0.01, (200, len(x)))
+    h, s, u0 = names.index("beam_hwhm_h_deg"), names.index("diffuse_share"), names.index("offset_u[0, 0]")
+    boots[:, h] = x[h] - 0.5 + rng.normal(0, 0.01, 200)  # all one way
+    boots[:, s] = x[s]  # never moved
+    boots[:, u0] = x[u0] + rng.normal(0, 12.0, 200)  # beyond +-10 cm
+    u = C.uncertainty(x, boots, FLOOD, 0.9)
+    phys = C.to_physical(x, FLOOD)
+    for k, v in phys.items():
+        lo, hi = np.moveaxis(np.asarray(u.interval[k]), -1, 0)
+        assert (lo <= np.asarray(v) + 1e-12).all() and (np.asarray(v) <= hi + 1e-12).all(), k
+    assert set(u.not_identified) == {"beam_hwhm_h_deg", "diffuse_share", "offset_u[0, 0]"}, u.not_identified
+    assert "misses" in u.not_identified["beam_hwhm_h_deg"] and "no width" in u.not_identified["diffuse_share"]
+    assert u.at_bound == ["offset_u[0, 0]"]
+    assert u.se["diffuse_share"] < 1e-12 and u.se["beam_hwhm_v_deg"] > 0
+    # the widened interval reaches from the resamples to the estimate
+    assert u.interval["beam_hwhm_h_deg"][1] == pytest.approx(phys["beam_hwhm_h_deg"])
+    # a coordinate pinned at its bound is named in both
+    x[names.index("scale[1, 1]")] = np.log(3.0)
+    u = C.uncertainty(x, x + rng.normal(0, 0.01, (200, len(x))), FLOOD, 0.9)
+    assert "scale[1, 1]" in u.at_bound and "pinned" in u.not_identified["scale[1, 1]"]
