@@ -16,7 +16,7 @@ from denali_pipe.cli.warm_start import worker_usage
 from denali_pipe.core.capture_sets import expected_sets
 from denali_pipe.core.geometry import select_locations
 from denali_pipe.core.objects import load_catalogue
-from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE
+from denali_pipe.experiments.fig9 import CAPPED, CONTROL, MEAN_BASELINE
 from denali_pipe.experiments.generalisation import MODEL
 from denali_pipe.io.store import open_set
 from denali_pipe.train.conditions import TABLES as CONDITION_TABLES
@@ -425,6 +425,7 @@ def test_transforms_and_fig9(tiny_run):
     fig9 = pd.read_csv(tiny_run / "results/fig9.csv")
     assert set(fig9["fidelity"]) == {*FIDELITIES, CONTROL, MEAN_BASELINE} and len(FIDELITIES) == 4
     assert set(fig9["panel"]) == {"centre", "all_zones"} and fig9.loc[fig9["fidelity"].isin(FIDELITIES), "real_samples_saved"].notna().all()
+    assert CAPPED in fig9.columns  # the real-sample counts each row stands in for, where capped
     assert (tiny_run / "results/fig9.png").stat().st_size > 10_000
 
 

@@ -404,6 +404,8 @@ def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict,
     the fit. Returns the result and the fit and validation problems."""
     c = settings["calibration"]
     n = len(captures.real)
+    if n < 3:
+        raise ValueError(f"twin calibration: {n} training captures; the fit needs at least 2 and its validation 1")
     rng = np.random.default_rng(seed)
     order = rng.permutation(n)
     n_val = min(max(int(round(c["validation_fraction"] * n)), 1), n - 2)
