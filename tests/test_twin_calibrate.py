@@ -133,29 +133,6 @@ def test_file_round_trips_into_calibrated_twins(cal, catalogue, fitted, tmp_path
         C.read_calibration(tmp_path / "missing.json")
 
 
-def test_under_the_flood_the_emission_widths_come_back(cal, catalogue, tmp_path):
-    """Planted under the flood (a beam narrower than the design's), the fit
-    returns the diffuse share and both emission half widths within 4
-    standard errors, fits no lobe width (the flood's narrow limit), and its
-    file makes flood twins of the fitted beam."""
-    assert C.tail_names(FLOOD) == [*C.GLOBALS, "diffuse_share", *C.EMISSION]
-    truth, captures, specs = _plant(cal, catalogue, FLOOD, [1.7, np.log(0.8), np.log(2.5), np.log(0.4 / 0.6), np.log(15.0), np.log(12.0)])
-    result, _, _ = C.calibrate(cal, specs, captures, FLOOD, seed=0)
-    want, got = C.to_physical(truth, FLOOD), C.to_physical(result.x, FLOOD)
-    assert "lobe_width_deg" not in got
-    for k in ("diffuse_share", *C.EMISSION):
-        se = float(np.asarray(result.se[k]))
-        assert 0 < se and abs(got[k] - want[k]) <= 4 * se + 1e-3 * abs(want[k]), (k, got[k], want[k], se)
-    assert (np.array(result.after["nl2"]) < np.array(result.before["nl2"])).all()
-    path = tmp_path / "twin_calibration.json"
-    C.write_calibration(path, result, FLOOD, {"n_captures": 1})
-    f = C.read_calibration(path)
-    assert f.illumination == "flood" and f.hwhm_deg == pytest.approx((got["beam_hwhm_h_deg"], got["beam_hwhm_v_deg"]))
-    tw = f.twin_scene(cal, _mesh(catalogue), {**FLOOD, "illumination": "spot"}, 3, catalogue["A"])  # the file's illumination, whatever the settings say
-    assert tw.flood is not None and tw.flood.hwhm_deg == pytest.approx(f.hwhm_deg)
-    assert tw.material.lobe_width_deg == SETTINGS["retroreflective"]["lobe_width_deg"]  # kept, unused
-
-
 def _mesh(catalogue):
     from denali_pipe.core.meshes import object_mesh
 
@@ -269,10 +246,11 @@ def test_recovered_on_a_scene_the_twin_was_not_designed_on(catalogue, tmp_path):
     gantry locations the test did not pick: each global parameter comes back
     within 4 standard errors or is named not identified, the emission's
     widths within their intervals, and every interval holds its estimate.
-    scripts/calibration_coverage.py measures the intervals' coverage over
-    many plantings (docs/twin.md)."""
+    The file makes flood twins of the fitted beam. scripts/calibration_coverage.py
+    measures the intervals' coverage over many plantings (docs/twin.md)."""
     from denali_pipe.twin.layout import perturbed_scene
 
+    assert C.tail_names(FLOOD) == [*C.GLOBALS, "diffuse_share", *C.EMISSION]
     rng = np.random.default_rng(7)
     locations = sorted(rng.choice(100, 10, replace=False).tolist())
     path = tmp_path / "scene.json"
@@ -303,3 +281,14 @@ def test_recovered_on_a_scene_the_twin_was_not_designed_on(catalogue, tmp_path):
     for k, v in got.items():
         lo, hi = np.moveaxis(np.asarray(result.interval[k]), -1, 0)
         assert (lo <= np.asarray(v) + 1e-12).all() and (np.asarray(v) <= hi + 1e-12).all(), k
+    assert "lobe_width_deg" not in got  # the flood's narrow limit: no lobe width to fit
+    # held out: the centre zone far closer; the dim corners stay at their noise (nl2 ~0.9), either way by a few %
+    before, after = np.array(result.before["nl2"]), np.array(result.after["nl2"])
+    assert after[1, 1] < 0.5 * before[1, 1] and after.mean() < before.mean()
+    path = tmp_path / "twin_calibration.json"
+    C.write_calibration(path, result, FLOOD, {"n_captures": 1})
+    f = C.read_calibration(path)
+    assert f.illumination == "flood" and f.hwhm_deg == pytest.approx((got["beam_hwhm_h_deg"], got["beam_hwhm_v_deg"]))
+    tw = f.twin_scene(cal, _mesh(catalogue), {**FLOOD, "illumination": "spot"}, 3, catalogue["A"])  # the file's illumination, whatever the settings say
+    assert tw.flood is not None and tw.flood.hwhm_deg == pytest.approx(f.hwhm_deg)
+    assert tw.material.lobe_width_deg == SETTINGS["retroreflective"]["lobe_width_deg"]  # kept, unused
