@@ -1,7 +1,8 @@
 """Fig 9 on tiny synthetic pairs: table shape (both panels, the control), a
-real test split disjoint from the real training samples, determinism per
-seed, predictions bounded to the training labels' box, the predict-the-mean
-baseline, and the real samples saved."""
+real test split of whole locations disjoint from everything trained on,
+real-sample counts capped at what the training captures hold, determinism
+per seed, predictions bounded to the training labels' box, the
+predict-the-mean baseline, and the real samples saved."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import pandas as pd
 import pytest
 
 from denali_pipe.core import geometry as geo
-from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE, PANELS, bound_to_workspace, control_hyper, real_samples, run_fig9
+from denali_pipe.experiments.fig9 import CAPPED, CONTROL, MEAN_BASELINE, PANELS, bound_to_workspace, control_hyper, real_samples, run_fig9, sample_counts
 from denali_pipe.report.fig9 import NEVER, samples_for, write_fig9
 from denali_pipe.train.training import Hyper
 from denali_pipe.transforms.sim_to_real import FIDELITIES, KERNEL_BINS, ZONES, Pairs, Transforms, ZoneTransforms, split_pairs
@@ -51,7 +52,9 @@ def test_table_shape(runs, tmp_path):
     assert len(models) == len(PANELS) * len(FIDELITIES) * len(f9["real_samples"]) * len(f9["seeds"])
     assert set(models["fidelity"]) == set(FIDELITIES) and set(models["n_real"]) == set(f9["real_samples"])
     assert set(control["n_real"]) == {5, 20} and (control["n_sim"] == 0).all() and set(runs["panel"]) == set(PANELS)
-    assert np.isfinite(runs["rmse"]).all() and (runs["n_test"] == 9 * R).all() and (models["n_sim"] == 21).all()
+    # 15 locations of 2 sets: 5 held out, both sets' captures there
+    assert np.isfinite(runs["rmse"]).all() and (runs["n_test"] == 10 * R).all() and (models["n_sim"] == 20).all()
+    assert (runs[CAPPED] == "").all()
     table = write_fig9(runs, tmp_path / "fig9.png", tmp_path / "fig9.csv")
     assert len(table) == len(PANELS) * (len(FIDELITIES) * len(f9["real_samples"]) + 2 + 1)
     assert {"rmse", "rmse_std", "mse", "mse_std", "mae", "mae_std", "n_seeds", "control_n_same_rmse", "real_samples_saved"} <= set(table.columns)
@@ -72,11 +75,35 @@ def test_samples_for_interpolates_along_the_control():
 
 def test_real_samples_saved_in_the_table(tmp_path):
     rows = [
-        {"panel": "centre", "fidelity": CONTROL, "n_real": n, "seed": 1, "n_sim": 0, "n_test": 9, "rmse": r, "mse": r * r, "mae": r, "rmse_euclidean": r}
+        {
+            "panel": "centre",
+            "fidelity": CONTROL,
+            "n_real": n,
+            CAPPED: "",
+            "seed": 1,
+            "n_sim": 0,
+            "n_test": 9,
+            "rmse": r,
+            "mse": r * r,
+            "mae": r,
+            "rmse_euclidean": r,
+        }
         for n, r in ((10, 0.10), (50, 0.06))
     ]
     rows += [
-        {"panel": "centre", "fidelity": "noisy", "n_real": n, "seed": 1, "n_sim": 5, "n_test": 9, "rmse": r, "mse": r * r, "mae": r, "rmse_euclidean": r}
+        {
+            "panel": "centre",
+            "fidelity": "noisy",
+            "n_real": n,
+            CAPPED: "",
+            "seed": 1,
+            "n_sim": 5,
+            "n_test": 9,
+            "rmse": r,
+            "mse": r * r,
+            "mae": r,
+            "rmse_euclidean": r,
+        }
         for n, r in ((0, 0.08), (10, 0.05), (50, 0.12))
     ]
     rows += [
@@ -84,6 +111,7 @@ def test_real_samples_saved_in_the_table(tmp_path):
             "panel": "centre",
             "fidelity": MEAN_BASELINE,
             "n_real": 0,
+            CAPPED: "",
             "seed": 1,
             "n_sim": 0,
             "n_test": 9,
@@ -106,6 +134,8 @@ def test_real_samples_never_come_from_the_test_split(data):
     real, _, keys = pairs.captures()
     split = split_pairs(keys, 42, SETTINGS["test_fraction"])
     assert np.array_equal(split.test, np.unique(split_pairs(pairs.keys, 42, SETTINGS["test_fraction"]).test // ZONES))  # the transforms' split
+    # whole locations: every set's capture at a test location is a test capture
+    assert not set(keys["location"].iloc[split.test]) & set(keys["location"].iloc[split.train])
     test_captures = set(map(tuple, keys.iloc[split.test][["set", "location"]].values))
     train_keys = keys.iloc[split.train].reset_index(drop=True)
     for seed in (1, 2):
@@ -114,8 +144,8 @@ def test_real_samples_never_come_from_the_test_split(data):
         assert drawn and not drawn & test_captures
         assert np.array_equal(x, real[split.train][idx[:, 0], idx[:, 1]]) and np.array_equal(y, xy[split.train][idx[:, 0]])
         assert np.array_equal(real_samples(real[split.train], xy[split.train], 5, seed)[2], idx[:5])  # nested as n grows
-    with pytest.raises(ValueError, match="only 63"):
-        real_samples(real[split.train], xy[split.train], 64, 1)
+    with pytest.raises(ValueError, match="only 60"):
+        real_samples(real[split.train], xy[split.train], 61, 1)
 
 
 def test_deterministic_per_seed(data, runs):
@@ -177,3 +207,25 @@ def test_the_control_takes_as_many_steps_as_a_twin_model():
     assert control_hyper(hp, 2100, 10).epochs == 165
     assert control_hyper(hp, 2000, 200).epochs == 44
     assert control_hyper(hp, 2000, 200).lr == hp.lr
+
+
+def test_sample_counts_cap_at_what_the_captures_hold():
+    assert sample_counts([0, 10, 50], 150) == [(0, ()), (10, ()), (50, ())]
+    # a 12-location release tree: 150 training repeats for the config's 200
+    assert sample_counts([0, 10, 50, 100, 200], 150) == [(0, ()), (10, ()), (50, ()), (100, ()), (150, (200,))]
+    assert sample_counts([200, 100, 10], 60) == [(10, ()), (60, (100, 200))]
+    assert sample_counts([0], 0) == [(0, ())]  # the twins alone still fit
+    with pytest.raises(ValueError, match="hold no real sample"):
+        sample_counts([0, 10], 0)
+
+
+def test_fig9_fits_the_real_samples_there_are_and_says_so(data, tmp_path):
+    """Counts above the 60 training repeats are fitted at 60, once, and the
+    CSV and the figure's ticks say which counts they stand for."""
+    capped = {**SETTINGS, "fig9": {**SETTINGS["fig9"], "real_samples": [0, 20, 100, 200], "seeds": [1]}}
+    runs = run_fig9(*data, TRANSFORMS, capped, HP, split_seed=42)
+    assert set(runs["n_real"]) == {0, 20, 60}
+    assert (runs.loc[runs["n_real"] == 60, CAPPED] == "100 200").all() and (runs.loc[runs["n_real"] < 60, CAPPED] == "").all()
+    table = write_fig9(runs, tmp_path / "fig9.png", tmp_path / "fig9.csv")
+    csv = pd.read_csv(tmp_path / "fig9.csv", keep_default_na=False, dtype={CAPPED: str})
+    assert (csv.loc[csv["n_real"] == 60, CAPPED] == "100 200").all() and len(csv) == len(table)

@@ -339,10 +339,13 @@ def test_build_pairs_matches_twins_by_object_size_location(tmp_path):
         build_pairs([off], twins)
 
 
-def test_split_keeps_captures_whole_and_is_seeded():
+def test_split_holds_out_whole_locations_and_is_seeded():
     keys = pd.DataFrame({"set": np.repeat(["a", "b"], 20), "location": np.tile(np.arange(20), 2)})
     s = split_pairs(keys, 42, 0.3)
-    assert len(s.test) == 12 and not set(s.train) & set(s.test)
+    # 6 of 20 locations, both sets' captures there: no test location is trained on
+    assert len(s.test) == 12 and not set(s.train) & set(s.test) and len(s.train) + len(s.test) == 40
+    test_locations = set(keys["location"].iloc[s.test])
+    assert len(test_locations) == 6 and not test_locations & set(keys["location"].iloc[s.train])
     assert np.array_equal(s.test, split_pairs(keys, 42, 0.3).test)
     assert not np.array_equal(s.test, split_pairs(keys, 43, 0.3).test)
 

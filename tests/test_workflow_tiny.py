@@ -16,7 +16,7 @@ from denali_pipe.cli.warm_start import worker_usage
 from denali_pipe.core.capture_sets import expected_sets
 from denali_pipe.core.geometry import select_locations
 from denali_pipe.core.objects import load_catalogue
-from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE
+from denali_pipe.experiments.fig9 import CAPPED, CONTROL, MEAN_BASELINE
 from denali_pipe.experiments.generalisation import MODEL
 from denali_pipe.io.store import open_set
 from denali_pipe.train.conditions import TABLES as CONDITION_TABLES
@@ -404,6 +404,11 @@ def test_renderer_settings_rerun_only_what_uses_them(tiny_run, tmp_path):
 def test_twin_calibration(tiny_run):
     c = json.loads((tiny_run / "results/twin_calibration.json").read_text())
     assert np.shape(c["parameters"]["scale"]) == (3, 3) and set(c["se"]) == set(c["parameters"])
+    for k, v in c["parameters"].items():  # every interval holds its estimate; the rest is flagged, not hidden
+        lo, hi = np.moveaxis(np.asarray(c["interval"][k]), -1, 0)
+        assert (lo <= np.asarray(v) + 1e-12).all() and (np.asarray(v) <= hi + 1e-12).all(), k
+    names = {f"{k}[{r}, {q}]" for k in ("offset_u", "offset_v", "scale") for r in range(3) for q in range(3)} | set(c["parameters"])
+    assert set(c["not_identified"]) <= names and set(c["at_bound"]) <= names
     # the tiny preset's object is retroreflective, lit by the flood: no lobe width (its narrow limit), the beam's widths
     assert {"time_offset", "diffuse_share", "beam_hwhm_h_deg", "beam_hwhm_v_deg"} <= set(c["parameters"]) and "lobe_width_deg" not in c["parameters"]
     assert c["illumination"] == "flood"
@@ -425,6 +430,7 @@ def test_transforms_and_fig9(tiny_run):
     fig9 = pd.read_csv(tiny_run / "results/fig9.csv")
     assert set(fig9["fidelity"]) == {*FIDELITIES, CONTROL, MEAN_BASELINE} and len(FIDELITIES) == 4
     assert set(fig9["panel"]) == {"centre", "all_zones"} and fig9.loc[fig9["fidelity"].isin(FIDELITIES), "real_samples_saved"].notna().all()
+    assert CAPPED in fig9.columns  # the real-sample counts each row stands in for, where capped
     assert (tiny_run / "results/fig9.png").stat().st_size > 10_000
 
 

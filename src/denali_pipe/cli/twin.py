@@ -27,7 +27,7 @@ def cmd_twin_calibration(args: argparse.Namespace) -> None:
     from denali_pipe.core.objects import spec_from_dict
     from denali_pipe.report.twin_calibration import plot_calibration
     from denali_pipe.transforms.sim_to_real import read_real, split_pairs
-    from denali_pipe.twin.calibrate import Captures, at_bound, calibrate, write_calibration
+    from denali_pipe.twin.calibrate import Captures, calibrate, write_calibration
     from denali_pipe.twin.layout import load_calibration
 
     require_keys(args.config, {"seed", "fit", "twin"})
@@ -47,12 +47,17 @@ def cmd_twin_calibration(args: argparse.Namespace) -> None:
         "seconds": time.perf_counter() - t0,
     }
     write_calibration(Path(args.out), result, settings, record)
-    pinned = at_bound(result.x, settings)
-    if pinned:
+    if result.at_bound:
         log.warning(
-            "twin calibration: %d coordinates at the edge of their range (%s): the twin's geometry cannot follow the captures there",
-            len(pinned),
-            ", ".join(pinned),
+            "twin calibration: %d coordinates at or near the edge of their range (%s): the twin's geometry cannot follow the captures there",
+            len(result.at_bound),
+            ", ".join(result.at_bound),
+        )
+    if result.not_identified:
+        log.warning(
+            "twin calibration: the captures do not identify %d coordinates: %s",
+            len(result.not_identified),
+            "; ".join(f"{k}: {why}" for k, why in result.not_identified.items()),
         )
     plot_calibration(result, held, Path(args.png))
     log.info("wrote %s and %s (%.1f s): residual before %s, after %s", args.out, args.png, record["seconds"], result.before, result.after)

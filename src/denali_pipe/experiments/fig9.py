@@ -11,9 +11,12 @@ samples, for a fixed number of epochs (no model selection, as the paper).
 Beside them, the control (`CONTROL`): the same localiser trained on the
 same n real samples alone (n > 0), no twin, for as many optimiser steps as
 a twin model (`control_hyper`). Every model is scored on the
-same held-out real test split: all repeats of the test captures
-(`transforms.split_pairs`, the split the calibration and the transforms
-were fitted on, so they never saw a test capture).
+same held-out real test split: all repeats of every capture at the held-out
+gantry locations (`transforms.split_pairs`, the split the calibration and
+the transforms were fitted on): no test location is seen by the twins'
+calibration or transforms, the twins' training rows, the control or the
+added real samples. A real-sample count above what the training captures
+hold is fitted at all of them, and the table says so (`sample_counts`).
 
 Per seed: the model's initialisation and batch order, the draw of real
 samples (one permutation of the training captures' repeats, its first n, so
@@ -55,6 +58,9 @@ log = logging.getLogger(__name__)
 
 MEAN_BASELINE = "mean_baseline"  # the `fidelity` of the predict-the-mean baseline's rows
 CONTROL = "real_only"  # the `fidelity` of the control's rows: n real samples, no twin
+# The column of the real-sample counts asked for that a row's n_real stands
+# in for, capped at the training captures' repeats ("" where none was).
+CAPPED = "n_real_capped_from"
 PANELS = {"centre": 1, "all_zones": GRID}  # panel -> zones per side the localiser sees
 
 
@@ -85,6 +91,23 @@ def sim_samples(
     return np.concatenate(x), np.tile(y, (copies, 1))
 
 
+def sample_counts(asked: list[int], available: int) -> list[tuple[int, tuple[int, ...]]]:
+    """The real-sample counts a tree can fit: each of `asked` capped at the
+    `available` real training samples (capture repeats), a count that several
+    asked ones cap to fitted once. Returns (n fitted, the asked counts capped
+    to it) in ascending n, the second empty where none was. ValueError when
+    a count above 0 is asked and no real sample is available: then nothing
+    is left to fit."""
+    if available <= 0 and any(n > 0 for n in asked):
+        raise ValueError(f"fig9: real-sample counts {sorted(asked)} asked for, but the training captures hold no real sample")
+    capped: dict[int, list[int]] = {}
+    for n in sorted(set(asked)):
+        capped.setdefault(min(n, available), [])
+        if n > available:
+            capped[available].append(n)
+    return [(n, tuple(c)) for n, c in sorted(capped.items())]
+
+
 def real_samples(real: np.ndarray, y: np.ndarray, n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The first `n` of one seeded permutation of every (capture, repeat) of
     real (C, R, ...): x (n, ...) counts, y (n, 2) metres, and their
@@ -95,6 +118,10 @@ def real_samples(real: np.ndarray, y: np.ndarray, n: int, seed: int) -> tuple[np
     flat = rng_for(seed, "fig9", "real").permutation(N * R)[:n]
     rows, reps = np.divmod(flat, R)
     return real[rows, reps], y[rows], np.stack([rows, reps], axis=1)
+
+
+def _asked(asked: tuple[int, ...]) -> str:
+    return " ".join(map(str, asked))
 
 
 def train_localiser(x: np.ndarray, y: np.ndarray, hp: Hyper, seed: int, precision: torch.dtype) -> tuple[nn.Module, tuple | None]:
@@ -168,8 +195,9 @@ def run_fig9(
 
     Returns one row per model, predictions bounded to its training labels'
     box, and one `MEAN_BASELINE` row per panel and seed: panel, fidelity,
-    n_real, seed, n_sim, n_test, then `metrics.regression_metrics` on the
-    real test samples (m, m^2)."""
+    n_real, `CAPPED`, seed, n_sim, n_test, then `metrics.regression_metrics`
+    on the real test samples (m, m^2). A count of real samples above the
+    training captures' repeats is fitted at all of them (`sample_counts`)."""
     real, sim, keys = pairs.captures()
     if len(labels) != len(keys):
         raise ValueError(f"fig9: {len(labels)} labels for {len(keys)} captures")
@@ -178,6 +206,10 @@ def run_fig9(
     crop = (pairs.crop_start, pairs.bins)
     y_train, y_test = labels[split.train], np.repeat(labels[split.test], real.shape[1], axis=0)
     baseline = regression_metrics(predict_mean_baseline(y_train, len(y_test)), y_test)
+    counts = sample_counts(f9["real_samples"], len(split.train) * real.shape[1])
+    for n, asked in counts:
+        if asked:
+            log.warning("fig9: real-sample counts %s asked for, but the training captures hold only %d: fitted at %d", list(asked), n, n)
     log.info("fig9 predict-the-mean baseline: test RMSE %.4f m", baseline["rmse"])
     rows = []
     for panel in PANELS:
@@ -188,16 +220,16 @@ def run_fig9(
             model_seed = derive_seed(seed, "fig9", "model") % 2**31
             common = {"panel": panel, "seed": seed, "n_test": len(x_test)}
             n_sim = f9["sim_copies"] * len(s_train)
-            for n_real in f9["real_samples"]:
+            for n_real, asked in counts:
                 if n_real > 0:
                     x_real, y_real, _ = real_samples(r_train, y_train, n_real, seed)
                     m = score(x_real, y_real, x_test, y_test, control_hyper(hp, n_sim, n_real), model_seed, precision)
-                    rows.append({**common, "fidelity": CONTROL, "n_real": n_real, "n_sim": 0, **m})
+                    rows.append({**common, "fidelity": CONTROL, "n_real": n_real, CAPPED: _asked(asked), "n_sim": 0, **m})
             for fidelity in FIDELITIES:
                 x_sim, y_sim = sim_samples(s_train, zones, y_train, zt, fidelity, f9["sim_copies"], seed, crop)
-                for n_real in f9["real_samples"]:
+                for n_real, asked in counts:
                     x_real, y_real, _ = real_samples(r_train, y_train, n_real, seed)
                     m = score(np.concatenate([x_sim, x_real]), np.concatenate([y_sim, y_real]), x_test, y_test, hp, model_seed, precision)
-                    rows.append({**common, "fidelity": fidelity, "n_real": n_real, "n_sim": len(x_sim), **m})
-            rows.append({**common, "fidelity": MEAN_BASELINE, "n_real": 0, "n_sim": 0, **baseline})
+                    rows.append({**common, "fidelity": fidelity, "n_real": n_real, CAPPED: _asked(asked), "n_sim": len(x_sim), **m})
+            rows.append({**common, "fidelity": MEAN_BASELINE, "n_real": 0, CAPPED: "", "n_sim": 0, **baseline})
     return pd.DataFrame(rows)

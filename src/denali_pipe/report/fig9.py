@@ -6,7 +6,9 @@ baseline as a dashed horizontal line.
 
 `results/fig9.csv` (one row per panel, fidelity and n_real, then the
 control's rows and one for `experiments.fig9.MEAN_BASELINE` at n_real 0 per
-panel: rmse, mse, mae, rmse_euclidean, each a mean over seeds with a
+panel: `experiments.fig9.CAPPED`, the counts asked for that n_real stands in
+for where the training captures hold fewer real samples (the figure's ticks
+and titles say so too); rmse, mse, mae, rmse_euclidean, each a mean over seeds with a
 matching `_std`, n_seeds, n_sim, n_test; for the fidelities,
 control_n_same_rmse, the real samples the control needs to reach the same
 RMSE (interpolated linearly between its n; "<=" its fewest n where it is
@@ -23,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from denali_pipe.core.figure import plt, save_figure
-from denali_pipe.experiments.fig9 import CONTROL, MEAN_BASELINE, PANELS
+from denali_pipe.experiments.fig9 import CAPPED, CONTROL, MEAN_BASELINE, PANELS
 from denali_pipe.transforms.sim_to_real import FIDELITIES
 
 METRICS = ("rmse", "mse", "mae", "rmse_euclidean")
@@ -46,9 +48,9 @@ def aggregate(runs: pd.DataFrame) -> pd.DataFrame:
     g = runs.groupby(["panel", "fidelity", "n_real"], sort=False)
     table = g[list(METRICS)].mean()
     std = g[list(METRICS)].std().fillna(0.0).add_suffix("_std")
-    extra = g.agg(n_seeds=("seed", "nunique"), n_sim=("n_sim", "first"), n_test=("n_test", "first"))
+    extra = g.agg(**{CAPPED: (CAPPED, "first")}, n_seeds=("seed", "nunique"), n_sim=("n_sim", "first"), n_test=("n_test", "first"))
     out = pd.concat([table, std, extra], axis=1).reset_index()
-    cols = ["panel", "fidelity", "n_real", *[c for m in METRICS for c in (m, f"{m}_std")], "n_seeds", "n_sim", "n_test"]
+    cols = ["panel", "fidelity", "n_real", CAPPED, *[c for m in METRICS for c in (m, f"{m}_std")], "n_seeds", "n_sim", "n_test"]
     out["order"] = out["panel"].map(list(PANELS).index) * len(ROWS) + out["fidelity"].map(ROWS.index)
     return out.sort_values(["order", "n_real"])[cols].reset_index(drop=True)
 
@@ -102,12 +104,15 @@ def write_fig9(runs: pd.DataFrame, out_png: Path, out_csv: Path) -> pd.DataFrame
         ax.errorbar(c["n_real"], c["rmse"], yerr=c["rmse_std"], marker="s", ms=4, capsize=3, color="k", lw=1.8, label=LABELS[CONTROL])
         # the baseline uses no histogram, so it is one level for every n_real
         ax.axhline(t.loc[t["fidelity"] == MEAN_BASELINE, "rmse"].item(), color="k", lw=1, ls="--", label=LABELS[MEAN_BASELINE])
-        ax.set_xticks(sorted(set(t["n_real"])))
+        ticks = t.drop_duplicates("n_real").sort_values("n_real")
+        ax.set_xticks(ticks["n_real"], [f"{n}\n(asked {c.replace(' ', ', ')})" if c else f"{n}" for n, c in zip(ticks["n_real"], ticks[CAPPED])])
         ax.set_xlabel("real training samples (added to the twins; the control's only ones)")
         # predictions are bounded to the workspace, so every RMSE is of its size: linear from 0 reads best
         ax.set_ylim(0, top * 1.05)
         ax.ticklabel_format(axis="y", style="plain", useOffset=False)
-        ax.set_title(f"{TITLES[panel]}: 1D CNN, {int(t['n_seeds'].min())} seeds", fontsize=9)
+        capped = sorted({int(a) for c in t[CAPPED] for a in c.split()})
+        note = f"\nreal samples capped at the training captures' {int(t['n_real'].max())}: asked {capped}" if capped else ""
+        ax.set_title(f"{TITLES[panel]}: 1D CNN, {int(t['n_seeds'].min())} seeds, test locations held out{note}", fontsize=9)
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("test RMSE on real captures (m)")
     handles, labels = axes[0][0].get_legend_handles_labels()

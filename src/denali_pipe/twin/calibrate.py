@@ -36,7 +36,8 @@ captures is held out of the fit: each zone's residual on them before
 (the design twin, with its gains and pulse fitted) and after calibration
 says what the fit bought. Uncertainties: a bootstrap over captures drawn
 with replacement, as transforms.json's, each resample's refit linearised
-about the fit (`linearised_bootstrap`).
+about the fit (`linearised_bootstrap`), its intervals holding the estimate
+and the coordinates the captures do not pin down named (`uncertainty`).
 
 The 8x8 grid's footprints follow from the 3x3 fit: an affine map of the
 zone centres on the wall (nominal -> fitted, least squares over the 9
@@ -254,6 +255,13 @@ def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, 
 # coordinate's range is 0.23 % of a scale, 0.02 cm of an offset and 0.04
 # bins of the time offset: no physical difference from the bound.
 BOUND_TOLERANCE = 1e-3
+# A coordinate whose bootstrap interval spans more than this share of its
+# range is not identified: the captures narrow it less than 4x from what the
+# bounds allow (a scale's 90 % interval over 1.8x, a width's over 2.3x, an
+# offset's over 5 cm). Planted under a 5 x 4 deg flood, whose off-centre
+# zones hold no signal above the noise, the fit put a width at 31 deg with
+# an interval of 9-183 deg that missed the truth and spanned 0.9 of its range.
+IDENTIFIED_SPAN = 0.25
 
 
 def _bounds(settings: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -309,6 +317,18 @@ class Problem:
         return (self.y - g[None, :, None] * m) / self.sigma[None, :, None]
 
 
+def planted_captures(problem: Problem, truth: np.ndarray, gains: np.ndarray, noise_sd: float, repeats: int, rng: np.random.Generator) -> Captures:
+    """Captures the twin itself renders at fit coordinates `truth`: the
+    twins of `problem`'s captures (`Problem.twins`) times each zone's gain
+    (Z,), `repeats` repeats with Gaussian noise of sd `noise_sd` (counts)
+    each, in `problem`'s bins. For the recovery tests and the coverage
+    script (scripts/calibration_coverage.py)."""
+    mean = gains[None, :, None] * problem.twins(truth)
+    n, _, t = mean.shape
+    real = mean[:, None] + rng.normal(0, noise_sd, (n, repeats, ZONES, t))
+    return Captures(real.reshape(n, repeats, GRID, GRID, t).astype(np.float32), problem.model.keys, problem.crop)
+
+
 def fit(problem: Problem, x0: np.ndarray, max_evaluations: int) -> tuple[np.ndarray, dict]:
     """The least-squares parameters (fit coordinates) from x0 (trust region
     reflective, bounded; forward-difference Jacobian with STEP), and a record
@@ -325,16 +345,25 @@ def fit(problem: Problem, x0: np.ndarray, max_evaluations: int) -> tuple[np.ndar
     return res.x, {"evaluations": int(res.nfev), "converged": bool(res.status > 0)}
 
 
-def at_bound(x: np.ndarray, settings: dict) -> list[str]:
-    """The fit coordinates pinned at a bound (within `BOUND_TOLERANCE` of
-    the coordinate's range), by name (per-zone ones as name[row, col]): there the
-    data push past the range the twin's geometry allows, and the bootstrap's
-    spread says nothing."""
-    lo, hi = _bounds(settings)
+def coordinate_names(settings: dict) -> list[str]:
+    """The fit coordinates' names, in order (per-zone ones as name[row, col])."""
     names = [f"offset_{'uv'[i % 2]}[{i // 2 // GRID}, {i // 2 % GRID}]" for i in range(2 * ZONES)]
-    names += [f"scale[{z // GRID}, {z % GRID}]" for z in range(ZONES)] + tail_names(settings)
+    return names + [f"scale[{z // GRID}, {z % GRID}]" for z in range(ZONES)] + tail_names(settings)
+
+
+def at_bound(x: np.ndarray, settings: dict, interval: np.ndarray | None = None) -> list[str]:
+    """The fit coordinates at or near a bound, by name (`coordinate_names`):
+    pinned (within `BOUND_TOLERANCE` of the coordinate's range of it: there
+    the data push past the range the twin's geometry allows, and the
+    bootstrap's spread says nothing), or, given their bootstrap intervals
+    (P, 2) in fit coordinates, whose interval reaches past a bound (the
+    captures do not keep it inside its range)."""
+    lo, hi = _bounds(settings)
     tol = BOUND_TOLERANCE * (hi - lo)
-    return [n for n, v, a, b, t in zip(names, x, lo, hi, tol) if v - a < t or b - v < t]
+    near = (x - lo < tol) | (hi - x < tol)
+    if interval is not None:
+        near |= (interval[:, 0] < lo) | (interval[:, 1] > hi)
+    return [n for n, k in zip(coordinate_names(settings), near) if k]
 
 
 def to_physical(x: np.ndarray, settings: dict) -> dict:
@@ -381,6 +410,8 @@ class Result:
     after: dict
     se: dict
     interval: dict
+    not_identified: dict
+    at_bound: list
     x_before: np.ndarray
     gains_before: np.ndarray
     fit: dict
@@ -392,6 +423,8 @@ def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict,
     the fit. Returns the result and the fit and validation problems."""
     c = settings["calibration"]
     n = len(captures.real)
+    if n < 3:
+        raise ValueError(f"twin calibration: {n} training captures; the fit needs at least 2 and its validation 1")
     rng = np.random.default_rng(seed)
     order = rng.permutation(n)
     n_val = min(max(int(round(c["validation_fraction"] * n)), 1), n - 2)
@@ -406,13 +439,12 @@ def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict,
     gains_before = problem.gains(problem.twins(x_before))
     x, fit_record = fit(problem, x_before, c["max_evaluations"])
     gains = problem.gains(problem.twins(x))
-    phys = to_physical(x, settings)
-    boots = [to_physical(xb, settings) for xb in linearised_bootstrap(problem, x, gains, c["bootstrap_resamples"], rng)]
-    level = c["level"]
-    tails = (50 * (1 - level), 50 * (1 + level))
-    se = {k: np.std([np.asarray(bt[k]) for bt in boots], axis=0, ddof=1).tolist() for k in phys}
-    interval = {k: np.moveaxis(np.percentile([np.asarray(bt[k]) for bt in boots], tails, axis=0), 0, -1).tolist() for k in phys}
-    result = Result(x, gains, zone_residuals(held, x_before, gains_before), zone_residuals(held, x, gains), se, interval, x_before, gains_before, fit_record)
+    boots = linearised_bootstrap(problem, x, gains, c["bootstrap_resamples"], rng)
+    u = uncertainty(x, boots, settings, c["level"])
+    result = Result(
+        x, gains, zone_residuals(held, x_before, gains_before), zone_residuals(held, x, gains), u.se, u.interval, u.not_identified, u.at_bound,
+        x_before, gains_before, fit_record,
+    )  # fmt: skip
     return result, problem, held
 
 
@@ -437,27 +469,97 @@ def capture_jacobian(problem: Problem, x: np.ndarray, gains: np.ndarray) -> tupl
     return r0.reshape(n, -1), jac.reshape(n, zones * t, -1)
 
 
-def linearised_bootstrap(problem: Problem, x: np.ndarray, gains: np.ndarray, resamples: int, rng: np.random.Generator) -> list[np.ndarray]:
-    """`resamples` bootstrap estimates (fit coordinates, clipped to the
-    bounds): captures drawn with replacement, each resample's refit replaced
-    by one Gauss-Newton step from the full fit (x, gains) on the resampled
-    captures' residuals and Jacobian. To first order this is the refit's
-    estimate (the fit is at a minimum of the full data, a resample moves it
-    by O(1/sqrt(N))); it costs one Jacobian for all resamples where refits
-    cost one fit each (1.5 min a refit on the demo's 400 captures)."""
+def linearised_bootstrap(problem: Problem, x: np.ndarray, gains: np.ndarray, resamples: int, rng: np.random.Generator) -> np.ndarray:
+    """(resamples, P) bootstrap estimates in the fit coordinates (unbounded:
+    offsets, log scales and times, logit share): x plus each resample's
+    `one_step_deviations` from the capture Jacobian at the fit (x, gains).
+    To first order this is the refit's estimate (a resample moves the fit by
+    O(1/sqrt(N))); it costs one Jacobian for all resamples where refits cost
+    one fit each (1.5 min a refit on the demo's 400 captures)."""
     r, jac = capture_jacobian(problem, x, gains)
+    lo, hi = _bounds(problem.settings)
+    return x + one_step_deviations(r, jac, resamples, rng, hi - lo)[:, : len(x)]
+
+
+def one_step_deviations(r: np.ndarray, jac: np.ndarray, resamples: int, rng: np.random.Generator, spans: np.ndarray) -> np.ndarray:
+    """(resamples, Q) how far a refit on captures drawn with replacement
+    moves from the fit, linearised: the Gauss-Newton step on the resample's
+    residuals r (N, M) and Jacobian jac (N, M, Q), less the same step on all
+    the captures.
+
+    The fit is not at an exact minimum of the full data: it stops at
+    `COST_TOLERANCE`, along a valley, or with a coordinate pinned at a bound,
+    and there the full data's own Gauss-Newton step can be long. A resample's
+    step from the fit carries that step too, so uncentred every resample
+    moved the same way, past a bound, and clipped to it (the demo's widths:
+    a 90 % interval [3.0, 3.0] deg about 4.14 deg, SE 0). A resample's refit
+    would stop short of it as the fit did; its difference from the fit is the
+    difference of the two steps. No bound is applied: a deviation is capped
+    at its coordinate's whole range (`spans`, (P,) for the first P of Q; the
+    gains' are not capped), past which it says no more than that the
+    captures leave the coordinate anywhere in it."""
     a = np.einsum("nip,niq->npq", jac, jac)
     b = np.einsum("nip,ni->np", jac, r)
-    lo, hi = _bounds(problem.settings)
     # Jacobi scaling: the gains' columns are orders of magnitude off the geometry's
     d = np.sqrt(np.maximum(np.diagonal(a.sum(axis=0)), 1e-300))
-    out = []
-    for _ in range(resamples):
-        w = np.bincount(rng.integers(0, len(r), len(r)), minlength=len(r)).astype(float)
+
+    def step(w: np.ndarray) -> np.ndarray:
         aw, bw = np.tensordot(w, a, 1) / np.outer(d, d), np.tensordot(w, b, 1) / d
-        step = np.linalg.lstsq(aw, -bw, rcond=1e-10)[0] / d
-        out.append(np.clip(x + step[: len(x)], lo, hi))
-    return out
+        return np.linalg.lstsq(aw, -bw, rcond=1e-10)[0] / d
+
+    full = step(np.ones(len(r)))
+    out = np.array([step(np.bincount(rng.integers(0, len(r), len(r)), minlength=len(r)).astype(float)) - full for _ in range(resamples)])
+    cap = np.r_[spans, np.full(out.shape[1] - len(spans), np.inf)]
+    return np.clip(out, -cap, cap)
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """The calibration's uncertainties, physical units (`to_physical`'s
+    names and shapes): se, the bootstrap's sd; interval, [low, high] of
+    coverage `level` (trailing axis 2), always holding the estimate;
+    not_identified, {coordinate name: why} for each coordinate the captures
+    do not pin down; at_bound, `at_bound`'s names."""
+
+    se: dict
+    interval: dict
+    not_identified: dict
+    at_bound: list
+
+
+def uncertainty(x: np.ndarray, boots: np.ndarray, settings: dict, level: float) -> Uncertainty:
+    """The uncertainties of the fit x (P,) from bootstrap estimates boots
+    (B, P), both in fit coordinates.
+
+    Percentile intervals are taken in the fit coordinates, where every
+    coordinate is unbounded, and mapped to physical units through
+    `to_physical` (increasing in each coordinate). A coordinate is not
+    identified when it is pinned at a bound, when its interval has no width
+    (no resample moves it: the captures do not depend on it, as a zone
+    whose gain is 0), when its interval misses the estimate (the resamples
+    all move one way: the fit is not where the data would put it), or when
+    its interval spans more than `IDENTIFIED_SPAN` of its range. An interval
+    that misses the estimate is reported widened to hold it, and flagged."""
+    lo, hi = _bounds(settings)
+    span = hi - lo
+    names = coordinate_names(settings)
+    tails = (50 * (1 - level), 50 * (1 + level))
+    q = np.percentile(boots, tails, axis=0).T  # (P, 2)
+    why = dict.fromkeys(at_bound(x, settings), "pinned at a bound of its range: its spread says nothing")
+    width = q[:, 1] - q[:, 0]
+    for i, n in enumerate(names):
+        if width[i] <= 1e-9 * span[i]:
+            why.setdefault(n, "its interval has no width: no resample of the captures moves it")
+        elif not q[i, 0] <= x[i] <= q[i, 1]:
+            why.setdefault(n, "its interval misses the estimate: every resample moves it one way")
+        elif width[i] > IDENTIFIED_SPAN * span[i]:
+            why.setdefault(n, f"its interval spans {width[i] / span[i]:.0%} of its range (more than {IDENTIFIED_SPAN:.0%})")
+    q = np.c_[np.minimum(q[:, 0], x), np.maximum(q[:, 1], x)]
+    low, high = to_physical(q[:, 0], settings), to_physical(q[:, 1], settings)
+    phys = [to_physical(xb, settings) for xb in boots]
+    se = {k: np.std([np.asarray(p[k]) for p in phys], axis=0, ddof=1).tolist() for k in low}
+    interval = {k: np.stack([np.asarray(low[k]), np.asarray(high[k])], axis=-1).tolist() for k in low}
+    return Uncertainty(se, interval, why, at_bound(x, settings, q))
 
 
 # --- the file ---------------------------------------------------------------------------
@@ -496,7 +598,8 @@ def write_calibration(path: Path, result: Result, settings: dict, record: dict) 
             "gains": result.gains_before.reshape(GRID, GRID).tolist(),
         },
         "residual": {"before": result.before, "after": result.after},
-        "at_bound": at_bound(result.x, settings),
+        "at_bound": result.at_bound,
+        "not_identified": result.not_identified,
         "fit": result.fit,
         **record,
     }

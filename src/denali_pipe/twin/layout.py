@@ -411,3 +411,26 @@ def nominal_scene(locations) -> dict:
         "tags": {str(k): {"position": p.t.tolist(), "rotation": p.R.tolist()} for k, p in geo.STATIC_TAGS.items()},
         "locations": {str(int(k)): {"object": geo.object_pose(int(k)).to_dict(), "tag1": geo.tag1_pose(int(k)).to_dict()} for k in locations},
     }
+
+
+def perturbed_scene(locations, seed: int, shift_m: float = 0.02, turn_deg: float = 3.0) -> dict:
+    """`nominal_scene` moved off the design drawing, as a measured scene is:
+    the sensor, and each location's object, shifted by up to `shift_m` along
+    each axis and turned by up to `turn_deg` about a random axis through
+    its origin, drawn from `seed`. For the calibration's recovery tests and
+    its coverage script: a scene the twin was not designed on."""
+    from scipy.spatial.transform import Rotation
+
+    doc = nominal_scene(locations)
+    rng = np.random.default_rng(seed)
+
+    def move(p: dict) -> dict:
+        axis = rng.normal(size=3)
+        turn = Rotation.from_rotvec(axis / np.linalg.norm(axis) * np.deg2rad(rng.uniform(-turn_deg, turn_deg))).as_matrix()
+        return {"R": (turn @ np.asarray(p["R"])).tolist(), "t": (np.asarray(p["t"]) + rng.uniform(-shift_m, shift_m, 3)).tolist()}
+
+    doc["sensor"]["pose"] = move(doc["sensor"]["pose"])
+    doc["sensor"]["position"] = doc["sensor"]["pose"]["t"]
+    for rec in doc["locations"].values():
+        rec["object"] = move(rec["object"])
+    return doc
