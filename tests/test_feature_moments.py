@@ -48,6 +48,8 @@ def test_forward_pass_matches_a_plain_float64_backbone(nets):
         for (m, v), (rm, rv) in zip(fm.layer_moments(net, hist), reference_moments(net, hist)):
             np.testing.assert_allclose(m, rm, atol=1e-4 * np.sqrt(rv.max()))
             np.testing.assert_allclose(v, rv, rtol=1e-4, atol=1e-6 * rv.max())
+        # the first layer alone, as the fit reads it
+        np.testing.assert_array_equal(fm.layer_moments(net, hist, depth=1)[0][1], fm.layer_moments(net, hist)[0][1])
 
 
 def test_the_real_zone_means_give_the_real_layer_1_means(nets):

@@ -101,18 +101,19 @@ def load_backbones(folder: Path) -> list[Backbone]:
     return nets
 
 
-def layer_moments(net: Backbone, hist: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+def layer_moments(net: Backbone, hist: np.ndarray, depth: int = len(LAYERS)) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per layer, the mean and (population) variance of every channel of the
-    BN's input over the samples and time positions: [(mean (C,), var (C,))].
-    hist: raw counts (N, 9, 128)."""
+    BN's input over the samples and time positions: [(mean (C,), var (C,))]
+    for the first `depth` layers. hist: counts (N, 9, 128), float allowed."""
     import torch  # here: the workflow reads this module's file names without loading torch
 
     hist = np.asarray(hist)
     if hist.ndim != 3 or hist.shape[1] != net.layers[0].conv.shape[1]:
         raise ValueError(f"feature moments need histograms (N, {net.layers[0].conv.shape[1]}, bins), got {hist.shape}")
     # sums about the running mean keep the variance exact in float64
-    s1 = [np.zeros(len(layer.running_mean)) for layer in net.layers]
-    s2 = [np.zeros(len(layer.running_mean)) for layer in net.layers]
+    layers = net.layers[:depth]
+    s1 = [np.zeros(len(layer.running_mean)) for layer in layers]
+    s2 = [np.zeros(len(layer.running_mean)) for layer in layers]
     count = 0
     params = [
         (
@@ -121,7 +122,7 @@ def layer_moments(net: Backbone, hist: np.ndarray) -> list[tuple[np.ndarray, np.
             torch.from_numpy(layer.bn_weight / np.sqrt(layer.running_var + layer.eps)).float(),
             torch.from_numpy(layer.bn_bias).float(),
         )
-        for layer in net.layers
+        for layer in layers
     ]
     with torch.no_grad():
         for start in range(0, len(hist), CHUNK):
@@ -134,7 +135,7 @@ def layer_moments(net: Backbone, hist: np.ndarray) -> list[tuple[np.ndarray, np.
                 s2[i] += (d * d).sum(dim=(0, 2), dtype=torch.float64).numpy()
                 x = torch.nn.functional.gelu(d * scale[:, None] + bias[:, None])
     out = []
-    for layer, a, b in zip(net.layers, s1, s2):
+    for layer, a, b in zip(layers, s1, s2):
         mean_off = a / count
         out.append((layer.running_mean + mean_off, b / count - mean_off**2))
     return out
