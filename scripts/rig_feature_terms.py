@@ -23,7 +23,11 @@ Columns: the feature-moment distance averaged over the 18 release nets and
 3 layers, per layer, the raw-count and log-input nets' layer-1 median signed
 log variance ratio (below 0: less variance than the real), the largest and
 the centre zone's z mean offset from Part 7's, and the worst and centre zone
-mean's error against Part 5's. A few minutes on one core.
+mean's error against Part 5's. Then, for the configured rig, where in time
+its moments leave the real ones (`feature_moments.time_profile`: per layer
+and 16-bin block, the median over channels of E[(y - running_mean)^2] /
+running_var, the median over each kind of net; the real data average ~1).
+A few minutes on one core.
 """
 
 from __future__ import annotations
@@ -138,6 +142,13 @@ def main() -> None:
             header = f"{'':42s}" + "".join(f"{k:>15s}" for k in y)
             print(header)
         print(f"{name:42s}" + "".join(f"{v:15.2f}" for v in y.values()), flush=True)
+    hist = captures(lights, phot, args.repeats, args.seed + 1)
+    print("\nconfigured rig, per 16-bin block: median channel's E[(y - running_mean)^2] / running_var (real ~1)")
+    for kind in ("raw", "log_z"):
+        profile = np.median([fm.time_profile(net, hist) for net in nets if net.input == kind], axis=0)
+        for layer, p in zip(fm.LAYERS, profile):
+            blocks = p.reshape(-1, 16).mean(1)
+            print(f"  {kind:5s} nets, layer {layer}: " + " ".join(f"{v:7.1f}" for v in blocks))
 
 
 if __name__ == "__main__":

@@ -94,6 +94,19 @@ def test_distance_table_and_summary(nets):
     assert s["raw layer-1 var"] > 1.0
 
 
+def test_time_profile_of_flat_histograms(nets):
+    # flat in time: away from the padded ends every position holds the same
+    # layer-1 output, sum_k W[:, :, k] @ m, with no variance over samples
+    net = next(n for n in nets if n.input == "raw")
+    m = np.asarray(REAL_ZONE_MEANS).ravel() * 1.2
+    profile = fm.time_profile(net, np.broadcast_to(m[None, :, None], (2, 9, 128)))
+    layer = net.layers[0]
+    y = layer.conv.sum(-1) @ m
+    expected = np.median((y - layer.running_mean) ** 2 / layer.running_var)
+    assert profile.shape == (3, 128)
+    np.testing.assert_allclose(profile[0, 4:-4], expected, rtol=1e-4)
+
+
 def test_log_zone_means_are_the_transform_averaged():
     hist = np.full((2, 9, 128), np.expm1(fm.LOG_MEAN + fm.LOG_STD * 0.5))
     np.testing.assert_allclose(fm.log_zone_means(hist), 0.5)

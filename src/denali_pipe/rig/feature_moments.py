@@ -101,44 +101,69 @@ def load_backbones(folder: Path) -> list[Backbone]:
     return nets
 
 
-def layer_moments(net: Backbone, hist: np.ndarray, depth: int = len(LAYERS)) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per layer, the mean and (population) variance of every channel of the
-    BN's input over the samples and time positions: [(mean (C,), var (C,))]
-    for the first `depth` layers. hist: counts (N, 9, 128), float allowed."""
+def _offsets(net: Backbone, hist: np.ndarray, depth: int):
+    """Per chunk of samples, each of the first `depth` layers' BN input minus
+    its running mean, (n, C, T) float32 torch tensors: the backbone run as
+    at evaluation, in float32 as the nets ran."""
     import torch  # here: the workflow reads this module's file names without loading torch
 
     hist = np.asarray(hist)
     if hist.ndim != 3 or hist.shape[1] != net.layers[0].conv.shape[1]:
         raise ValueError(f"feature moments need histograms (N, {net.layers[0].conv.shape[1]}, bins), got {hist.shape}")
-    # sums about the running mean keep the variance exact in float64
-    layers = net.layers[:depth]
-    s1 = [np.zeros(len(layer.running_mean)) for layer in layers]
-    s2 = [np.zeros(len(layer.running_mean)) for layer in layers]
-    count = 0
     params = [
         (
             torch.from_numpy(layer.conv).float(),
-            torch.from_numpy(layer.running_mean).float(),
-            torch.from_numpy(layer.bn_weight / np.sqrt(layer.running_var + layer.eps)).float(),
-            torch.from_numpy(layer.bn_bias).float(),
+            torch.from_numpy(layer.running_mean).float()[:, None],
+            torch.from_numpy(layer.bn_weight / np.sqrt(layer.running_var + layer.eps)).float()[:, None],
+            torch.from_numpy(layer.bn_bias).float()[:, None],
         )
-        for layer in layers
+        for layer in net.layers[:depth]
     ]
     with torch.no_grad():
         for start in range(0, len(hist), CHUNK):
-            # float32, as the nets ran
             x = torch.from_numpy(net.transform(hist[start : start + CHUNK])).float()
-            count += x.shape[0] * x.shape[-1]
-            for i, (w, mean, scale, bias) in enumerate(params):
-                d = torch.nn.functional.conv1d(x, w, padding=w.shape[-1] // 2) - mean[:, None]
-                s1[i] += d.sum(dim=(0, 2), dtype=torch.float64).numpy()
-                s2[i] += (d * d).sum(dim=(0, 2), dtype=torch.float64).numpy()
-                x = torch.nn.functional.gelu(d * scale[:, None] + bias[:, None])
+            offsets = []
+            for w, mean, scale, bias in params:
+                d = torch.nn.functional.conv1d(x, w, padding=w.shape[-1] // 2) - mean
+                offsets.append(d)
+                x = torch.nn.functional.gelu(d * scale + bias)
+            yield offsets
+
+
+def layer_moments(net: Backbone, hist: np.ndarray, depth: int = len(LAYERS)) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per layer, the mean and (population) variance of every channel of the
+    BN's input over the samples and time positions: [(mean (C,), var (C,))]
+    for the first `depth` layers. hist: counts (N, 9, 128), float allowed."""
+    import torch
+
+    layers = net.layers[:depth]
+    # sums about the running mean keep the variance exact in float64
+    s1 = [np.zeros(len(layer.running_mean)) for layer in layers]
+    s2 = [np.zeros(len(layer.running_mean)) for layer in layers]
+    count = 0
+    for offsets in _offsets(net, hist, depth):
+        count += offsets[0].shape[0] * offsets[0].shape[-1]
+        for i, d in enumerate(offsets):
+            s1[i] += d.sum(dim=(0, 2), dtype=torch.float64).numpy()
+            s2[i] += (d * d).sum(dim=(0, 2), dtype=torch.float64).numpy()
     out = []
     for layer, a, b in zip(layers, s1, s2):
         mean_off = a / count
         out.append((layer.running_mean + mean_off, b / count - mean_off**2))
     return out
+
+
+def time_profile(net: Backbone, hist: np.ndarray) -> np.ndarray:
+    """Where in time the captures leave the real moments: per layer and time
+    position, the median over channels of E[(y - running_mean)^2] / running_var
+    over the samples, (layers, T). The real data average 1 + (mean term)^2
+    over positions; a position far above 1 holds patterns the nets saw little of."""
+    sums, count = None, 0
+    for offsets in _offsets(net, hist, len(LAYERS)):
+        z2 = [((d * d).sum(0).numpy().astype(np.float64)) / layer.running_var[:, None] for d, layer in zip(offsets, net.layers)]
+        sums = z2 if sums is None else [a + b for a, b in zip(sums, z2)]
+        count += offsets[0].shape[0]
+    return np.stack([np.median(s / count, axis=0) for s in sums])
 
 
 def moment_terms(mean: np.ndarray, var: np.ndarray, layer: Layer) -> tuple[float, float, float]:
