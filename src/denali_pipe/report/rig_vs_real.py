@@ -168,6 +168,7 @@ def plot_layer(ax, table: pd.DataFrame, layer: int) -> None:
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_xticks(x, [f"{n} ({i})" for n, i in zip(t.net, t.input)], rotation=90, fontsize=6)
     ax.set_xlim(-0.6, len(t) - 0.4)
+    ax.set_ylim(0, 1.3 * t.distance.max())  # room for the legend
     ax.set_ylabel("distance (0 = the real moments)")
     by_input = t.groupby("input").distance.mean()
     low = (t.var_log_ratio < 0).sum()
