@@ -12,6 +12,7 @@ from pathlib import Path
 import pandas as pd
 
 from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
+from denali_pipe.rig import feature_moments
 from denali_pipe.train.cells import LINEAR, SPLITS, TASKS, is_ill_posed, uses_gpu
 from denali_pipe.workflow.costs import combine, cost_model, frame_pixels, gpu_speedup, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
 from denali_pipe.train.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
@@ -145,6 +146,17 @@ def rig_vs_real_pairs():
     obj = min((s.object for s in base), key=lambda o: (o != "square", CATALOGUE[o].type != "shape", o))
     picks = sorted((s for s in base if s.object == obj), key=lambda s: (s.light != "lightoff", s.size != "8inch"))
     return [(store(s.name), store(background_of(s).name)) for s in picks]
+
+
+def feature_stats_files():
+    """The release's feature statistics that rig_vs_real reads (none unless configured)."""
+    folder = config["rig_vs_real"]["feature_stats"]
+    return [] if folder is None else [str(Path(folder) / name) for name in (feature_moments.NPZ, feature_moments.JSON)]
+
+
+def feature_stats_arg():
+    folder = config["rig_vs_real"]["feature_stats"]
+    return "" if folder is None else f"--feature-stats {shlex.quote(folder)}"
 
 
 # --- poses -------------------------------------------------------------------

@@ -42,10 +42,13 @@ rule rig_vs_real:
     input:
         sets=[obj for obj, _ in rig_vs_real_pairs()],
         backgrounds=[bg for _, bg in rig_vs_real_pairs()],
+        feature_stats=feature_stats_files(),
     output:
         png=report("results/rig_vs_real.png", caption="../report/rig_vs_real.rst", category="1. Captures"),
         csv="results/rig_vs_real.csv",
     log:
         "logs/rig_vs_real.log",
+    params:
+        feature_stats=feature_stats_arg(),
     shell:
-        "{DENALI} rig-vs-real --sets {input.sets} --backgrounds {input.backgrounds} --png {output.png} --csv {output.csv} > {log} 2>&1"
+        "{DENALI} rig-vs-real --sets {input.sets} --backgrounds {input.backgrounds} --png {output.png} --csv {output.csv} {params.feature_stats} > {log} 2>&1"

@@ -4,6 +4,7 @@ writes nothing.
 
     python scripts/fit_zones.py                  # start from the config's rig
     python scripts/fit_zones.py --config other.yaml
+    python scripts/fit_zones.py --features ../shared/denali-assets/feature_stats
 
 How `rig.photometry`'s emission, flux, saturation, floor and slow tail were
 fitted (docs/rig_zones.md): least squares on the nine zones' log mean counts
@@ -20,6 +21,16 @@ core's share and width, the yaw, the flux, the saturation count, the dark
 floor (room light twice it) and the slow tail's share. The pulse's fast part,
 the slow tail's time constant, the dead time and the vignetting stay as
 configured. A few minutes on one core.
+
+With `--features DIR` (the release's 1D CNN statistics, REFERENCE Part 7)
+the fit adds Part 7's targets on the same expected counts: each zone's mean
+of z = (log1p(counts) - 7.108) / 0.785 against Part 7's (a 0.05 z scale), and
+the layer-1 channel variances of the raw-count and the log-input nets (the
+10/25/50/75/90 % quantiles of log(var / running_var) over each group's
+channels, a 0.15 scale); and frees three more physical terms: the room
+light apart from the dark counts, the slow tail's time constant and the
+SPADs' dead time. Layers 2 and 3 are not fitted: the final report gives
+them, held out (`rig.feature_moments`). `--max-nfev` bounds the evaluations.
 """
 
 from __future__ import annotations
@@ -34,14 +45,19 @@ from scipy.optimize import least_squares
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.objects import load_catalogue
-from denali_pipe.report.paper import REAL_ZONE_MEANS
+from denali_pipe.report.paper import REAL_LOG_ZONE_MEANS, REAL_ZONE_MEANS
 from denali_pipe.report.rig_vs_real import zone_pattern
+from denali_pipe.rig import feature_moments as fm
 from denali_pipe.rig import histograms as H
 from denali_pipe.rig.measure import measure
 from denali_pipe.rig.scene import design_scene
 
 REPO = Path(__file__).resolve().parents[1]
 ZONE_SCALE = 0.07
+# Part 7's targets (with --features): z zone means, layer-1 log variance ratios' quantiles
+LOG_ZONE_SCALE = 0.05
+VAR_SCALE = 0.15
+QUANTILES = (0.1, 0.25, 0.5, 0.75, 0.9)
 ASPECT = geo.SENSOR_FOV_DEG[1] / geo.SENSOR_FOV_DEG[0]
 # (name, low, high, scale) of each centre-zone check's penalty
 CHECKS = (
@@ -56,8 +72,13 @@ CHECKS = (
 
 
 def to_photometry(base: H.Photometry, v: np.ndarray) -> H.Photometry:
-    flood, core_logit, core, yaw, flux, sat, dark, slow_logit = v
-    return dataclasses.replace(
+    """The 8 zone parameters, then (with --features) room light, slow tail's time constant, dead time."""
+    flood, core_logit, core, yaw, flux, sat, dark, slow_logit = v[:8]
+    more = {}
+    if len(v) > 8:
+        ambient, slow_bins, dead = v[8:]
+        more = {"ambient_counts": float(np.exp(ambient)), "slow_tail_bins": float(np.exp(slow_bins)), "dead_time_counts": float(np.exp(dead))}
+    phot = dataclasses.replace(
         base,
         beam_hwhm_deg=(float(np.exp(flood)), float(np.exp(flood) * ASPECT)),
         core_share=float(1 / (1 + np.exp(-core_logit))),
@@ -69,13 +90,15 @@ def to_photometry(base: H.Photometry, v: np.ndarray) -> H.Photometry:
         ambient_counts=float(2 * np.exp(dark)),
         slow_tail_fraction=float(1 / (1 + np.exp(-slow_logit))),
     )
+    return dataclasses.replace(phot, **more)
 
 
 def _logit(x: float) -> float:
     return float(np.log(x / (1 - x)))
 
 
-def from_photometry(p: H.Photometry) -> np.ndarray:
+def from_photometry(p: H.Photometry, features: bool = False) -> np.ndarray:
+    more = [np.log(p.ambient_counts), np.log(p.slow_tail_bins), np.log(p.dead_time_counts)] if features else []
     return np.array(
         [
             np.log(p.beam_hwhm_deg[0]),
@@ -86,49 +109,92 @@ def from_photometry(p: H.Photometry) -> np.ndarray:
             np.log(p.saturation_counts),
             np.log(p.dark_counts),
             _logit(p.slow_tail_fraction),
+            *more,
         ]
     )
 
 
-def measures(phot: H.Photometry, catalogue: dict) -> tuple[np.ndarray, dict]:
-    """The zone means (3, 3) and the centre-zone checks, by CHECKS' names."""
+# The light transport depends on the photometry only through the beam and
+# the receiver: kept for the latest beam, so steps in the other terms reuse it.
+BEAM = ("beam_hwhm_deg", "beam_order", "core_share", "core_hwhm_deg", "beam_yaw_deg", "beam_pitch_deg", "vignetting_power")
+_transports: dict = {}
+
+
+def transport(catalogue: dict, name: str, location: int, phot: H.Photometry, mount_only: bool = False) -> H.Transport:
+    """The 8 in object `name` (or its mount alone) at `location`'s design pose."""
+    beam = tuple(getattr(phot, k) for k in BEAM)
+    if _transports.get("beam") != beam:
+        _transports.clear()
+        _transports["beam"] = beam
+    key = (name, location, mount_only)
+    if key not in _transports:
+        scene = design_scene(catalogue[name], "8inch", location)
+        _transports[key] = H.transport("3x3", scene[:1] if mount_only else scene, phot)
+    return _transports[key]
+
+
+def measures(phot: H.Photometry, catalogue: dict) -> tuple[np.ndarray, dict, np.ndarray]:
+    """The zone means (3, 3), the centre-zone checks by CHECKS' names, and
+    the expected counts they come from (12, 9, N_BINS)."""
 
     rng = np.random.default_rng(0)
-    means, logs = [], []
+    means, logs, hists = [], [], []
     for k in (5, 45, 94):
         for name in ("A", "square"):
-            light = H.transport("3x3", design_scene(catalogue[name], "8inch", k), phot)
+            light = transport(catalogue, name, k, phot)
             for on in (True, False):
                 expected = H.counts_from_transport("3x3", on, light, phot)
                 means.append(expected.mean(-1))
+                hists.append(expected.reshape(9, -1))
                 logs.append(np.log1p(H.sample_counts(expected, phot, rng)))
-    square = design_scene(catalogue["square"], "8inch", 45)
-    background = H.expected_counts("3x3", False, square[:1], phot)[1, 1]
+    background = H.counts_from_transport("3x3", False, transport(catalogue, "square", 45, phot, mount_only=True), phot)[1, 1]
     b = measure(background, background)
-    c = measure(H.expected_counts("3x3", False, square, phot)[1, 1], background)
-    eight = design_scene(catalogue["8"], "8inch", 90)
-    width = measure(H.expected_counts("3x3", False, eight, phot)[1, 1], H.expected_counts("3x3", False, eight[:1], phot)[1, 1]).bump_fwhm
+    c = measure(H.counts_from_transport("3x3", False, transport(catalogue, "square", 45, phot), phot)[1, 1], background)
+    eight = H.counts_from_transport("3x3", False, transport(catalogue, "8", 90, phot), phot)[1, 1]
+    width = measure(eight, H.counts_from_transport("3x3", False, transport(catalogue, "8", 90, phot, mount_only=True), phot)[1, 1]).bump_fwhm
     values = (b.floor_fraction, b.late_over_floor, c.bump_fraction, c.bump_over_floor, width, np.mean(logs), np.std(logs))
-    return np.mean(means, 0), dict(zip([name for name, *_ in CHECKS], values))
+    return np.mean(means, 0), dict(zip([name for name, *_ in CHECKS], values)), np.asarray(hists)
 
 
-def residuals(v: np.ndarray, base: H.Photometry, catalogue: dict) -> np.ndarray:
-    means, checks = measures(to_photometry(base, v), catalogue)
+def layer1_log_ratios(nets: list[fm.Backbone], hist: np.ndarray) -> dict[str, np.ndarray]:
+    """log(var / running_var) of every layer-1 channel, pooled per input kind."""
+    out: dict[str, list] = {}
+    for net in nets:
+        _, var = fm.layer_moments(net, hist, depth=1)[0]
+        out.setdefault(net.input, []).append(np.log(var / net.layers[0].running_var))
+    return {k: np.concatenate(v) for k, v in out.items()}
+
+
+def feature_residuals(hist: np.ndarray, nets: list[fm.Backbone]) -> np.ndarray:
+    dz = (fm.log_zone_means(hist) - np.ravel(REAL_LOG_ZONE_MEANS)) / LOG_ZONE_SCALE
+    ratios = layer1_log_ratios(nets, hist)
+    return np.concatenate([dz] + [np.quantile(ratios[k], QUANTILES) / VAR_SCALE for k in ("raw", "log_z")])
+
+
+def residuals(v: np.ndarray, base: H.Photometry, catalogue: dict, nets: list[fm.Backbone] | None = None) -> np.ndarray:
+    means, checks, hist = measures(to_photometry(base, v), catalogue)
     zones = np.log(means / np.asarray(REAL_ZONE_MEANS)).ravel() / ZONE_SCALE
     penalties = [(max(lo - checks[name], 0) + max(checks[name] - hi, 0)) / scale for name, lo, hi, scale in CHECKS]
-    return np.concatenate([zones, penalties])
+    features = feature_residuals(hist, nets) if nets else []
+    return np.concatenate([zones, penalties, features])
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", type=Path, default=REPO / "config" / "config.yaml")
+    ap.add_argument("--features", type=Path, default=None, help="the release's feature statistics folder: fit Part 7's targets too")
+    ap.add_argument("--max-nfev", type=int, default=40)
     args = ap.parse_args()
     with open(args.config) as f:
         base = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
     catalogue = load_catalogue(REPO / "config" / "objects.tsv")
-    fit = least_squares(residuals, from_photometry(base), args=(base, catalogue), diff_step=0.03, x_scale=0.3, max_nfev=40)
+    nets = fm.load_backbones(args.features) if args.features else None
+    start = from_photometry(base, features=nets is not None)
+    if nets:
+        print("start: " + held_out(base, catalogue, nets), flush=True)
+    fit = least_squares(residuals, start, args=(base, catalogue, nets), diff_step=0.03, x_scale=0.3, max_nfev=args.max_nfev)
     phot = to_photometry(base, fit.x)
-    means, checks = measures(phot, catalogue)
+    means, checks, _ = measures(phot, catalogue)
     print(f"{fit.nfev} evaluations, cost {fit.cost:.2f}, status {fit.status}")
     for name in (
         "beam_hwhm_deg",
@@ -140,12 +206,26 @@ def main() -> None:
         "dark_counts",
         "ambient_counts",
         "slow_tail_fraction",
+        "slow_tail_bins",
+        "dead_time_counts",
     ):
         value = getattr(phot, name)
         print(f"  {name}: {np.round(value, 3).tolist()}")
     print("zone error, %: " + " ".join(f"{100 * e:+.0f}" for e in (means / np.asarray(REAL_ZONE_MEANS) - 1).ravel()))
     print("  " + "; ".join(f"{k} {v:.2f}" for k, v in zone_pattern(means).items()))
     print("  " + "; ".join(f"{k} {v:.3g}" for k, v in checks.items()))
+    if nets:
+        print("fitted: " + held_out(phot, catalogue, nets))
+
+
+def held_out(phot: H.Photometry, catalogue: dict, nets: list[fm.Backbone]) -> str:
+    """Part 7's yardsticks on the fit's expected counts: the z zone offsets
+    and every layer's distance (layers 2 and 3 are not fitted)."""
+    _, _, hist = measures(phot, catalogue)
+    s = fm.summary(fm.feature_distances(nets, hist))
+    dz = fm.log_zone_means(hist) - np.ravel(REAL_LOG_ZONE_MEANS)
+    words = "; ".join(f"{k} {v:.2f}" for k, v in s.items())
+    return f"{words}; z zone offsets {' '.join(f'{d:+.2f}' for d in dz)}"
 
 
 if __name__ == "__main__":

@@ -1,14 +1,19 @@
 """`report/rig_vs_real.py`: the centre zone's measurements and every zone's
 mean counts, on stores of the rig's own histograms."""
 
+import logging
+
 import numpy as np
 import pandas as pd
+import pytest
+from conftest import ASSETS
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.capture_sets import parse_set_name
 from denali_pipe.io.store import StoreWriter, open_set
-from denali_pipe.report.paper import REAL_ZONE_MEANS
-from denali_pipe.report.rig_vs_real import REAL_ZONE_SOURCE, ZONE_SOURCE, rig_vs_real
+from denali_pipe.report.paper import REAL_LOG_ZONE_MEANS, REAL_ZONE_MEANS
+from denali_pipe.report.rig_vs_real import FEATURE_SOURCE, REAL_ZONE_SOURCE, ZONE_SOURCE, rig_vs_real
+from denali_pipe.rig import feature_moments as fm
 from denali_pipe.rig import histograms as H
 from denali_pipe.rig.scene import mount_scatterer, object_scatterer
 
@@ -24,25 +29,58 @@ def write_store(out, name, scene_at, phot, rng):
     return out / f"{name}.zarr"
 
 
-def test_every_zone_beside_part_5(tmp_path, demo_config, catalogue):
+@pytest.fixture(scope="module")
+def pairs(tmp_path_factory, demo_config, catalogue):
+    """Square 8 in and 4 in, both lightings, at LOCATIONS, 2 repeats each, with their backgrounds."""
+    out = tmp_path_factory.mktemp("rig_vs_real")
     phot = H.Photometry.from_config(demo_config["rig"]["photometry"])
     rng = np.random.default_rng(0)
     mount = lambda k: [mount_scatterer(geo.object_pose(k).t)]  # noqa: E731
-    bgs = {light: write_store(tmp_path, f"NOOBJECT_8inch_3x3_{light}", mount, phot, rng) for light in ("lightoff", "lighton")}
+    bgs = {light: write_store(out, f"NOOBJECT_8inch_3x3_{light}", mount, phot, rng) for light in ("lightoff", "lighton")}
     pairs = []
     for size in ("8inch", "4inch"):
         for light in ("lightoff", "lighton"):
             scene = lambda k, size=size: mount(k) + [object_scatterer(catalogue["square"], size, geo.object_pose(k))]  # noqa: E731
-            obj = write_store(tmp_path, f"square_{size}_3x3_{light}", scene, phot, rng)
+            obj = write_store(out, f"square_{size}_3x3_{light}", scene, phot, rng)
             pairs.append((obj, bgs[light]))
-    table = rig_vs_real(pairs, tmp_path / "rig_vs_real.png", tmp_path / "rig_vs_real.csv")
+    return pairs
+
+
+def test_every_zone_beside_part_5(tmp_path, pairs, caplog):
+    with caplog.at_level(logging.INFO):
+        table = rig_vs_real(pairs, tmp_path / "rig_vs_real.png", tmp_path / "rig_vs_real.csv")
+    # without the statistics' folder: no feature rows, and the log says so
+    assert "feature_stats is not configured" in caplog.text
     df = pd.read_csv(tmp_path / "rig_vs_real.csv")
     assert len(df) == len(table) == 4 + 3 + 18
+    assert not (df.source == FEATURE_SOURCE).any()
     rig = df[df.source == ZONE_SOURCE].sort_values(["zone_row", "zone_col"])
     real = df[df.source == REAL_ZONE_SOURCE].sort_values(["zone_row", "zone_col"])
     np.testing.assert_allclose(real.mean_counts.to_numpy().reshape(3, 3), REAL_ZONE_MEANS)
     np.testing.assert_allclose(rig.real_mean_counts.to_numpy().reshape(3, 3), REAL_ZONE_MEANS)
+    np.testing.assert_allclose(rig.real_mean_z.to_numpy().reshape(3, 3), REAL_LOG_ZONE_MEANS)
     # the rig's zone means are the object sets' histograms averaged over locations, repeats and bins
-    direct = np.mean([open_set(p).histograms[:].astype(float).mean(axis=(0, 1, -1)) for p, _ in pairs], axis=0)
-    np.testing.assert_allclose(rig.mean_counts.to_numpy().reshape(3, 3), direct, rtol=1e-9)
+    hist = np.concatenate([open_set(p).histograms[:].astype(float) for p, _ in pairs])
+    np.testing.assert_allclose(rig.mean_counts.to_numpy().reshape(3, 3), hist.mean(axis=(0, 1, -1)), rtol=1e-9)
+    z = (np.log1p(hist) - fm.LOG_MEAN) / fm.LOG_STD
+    np.testing.assert_allclose(rig.mean_z.to_numpy().reshape(3, 3), z.mean(axis=(0, 1, -1)), rtol=1e-9)
     assert (tmp_path / "rig_vs_real.png").stat().st_size > 20_000
+
+
+@pytest.mark.skipif(not (ASSETS / "feature_stats" / fm.NPZ).exists(), reason="the release's feature statistics are not present")
+def test_feature_moments_of_the_same_captures(tmp_path, pairs):
+    rig_vs_real(pairs, tmp_path / "rig_vs_real.png", tmp_path / "rig_vs_real.csv", ASSETS / "feature_stats")
+    df = pd.read_csv(tmp_path / "rig_vs_real.csv")
+    feats = df[df.source == FEATURE_SOURCE]
+    assert len(feats) == 18 * 3 and len(df) == 4 + 3 + 18 + 54
+    # measured on every capture of the object sets, as the zone means are
+    hist = np.concatenate([open_set(p).histograms[:].reshape(-1, 9, 128) for p, _ in pairs])
+    direct = fm.feature_distances(fm.load_backbones(ASSETS / "feature_stats"), hist)
+    np.testing.assert_allclose(feats.distance.to_numpy(), direct.distance.to_numpy(), rtol=1e-9)
+    assert np.isfinite(feats[["mean_term", "var_term"]].to_numpy()).all()
+    # the rig's zone means are within 15 % of Part 5's (test_histograms), so the raw-count nets'
+    # layer-1 means, a linear function of them, must sit near the real ones: the captures
+    # reach the nets in the stored zone order and in counts
+    raw1 = feats[(feats.input == "raw") & (feats.layer == 1)]
+    assert len(raw1) == 3 and (raw1.mean_term < 0.2).all()
+    assert (tmp_path / "rig_vs_real.png").stat().st_size > 40_000

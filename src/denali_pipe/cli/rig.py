@@ -44,7 +44,8 @@ def cmd_rig_vs_real(args: argparse.Namespace) -> None:
 
     if len(args.sets) != len(args.backgrounds):
         raise ValueError(f"rig-vs-real: {len(args.sets)} sets but {len(args.backgrounds)} backgrounds")
-    rig_vs_real(list(zip(map(Path, args.sets), map(Path, args.backgrounds))), Path(args.png), Path(args.csv))
+    stats = Path(args.feature_stats) if args.feature_stats else None
+    rig_vs_real(list(zip(map(Path, args.sets), map(Path, args.backgrounds))), Path(args.png), Path(args.csv), stats)
     log.info("wrote %s and %s", args.png, args.csv)
 
 
@@ -65,4 +66,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--backgrounds", nargs="+", required=True, help="the matching NOOBJECT set stores, in the same order")
     s.add_argument("--png", required=True, help="the figure")
     s.add_argument("--csv", required=True, help="the measured numbers beside the real figures'")
+    s.add_argument(
+        "--feature-stats", default=None, help="folder of the release's 1D CNN backbones and BN statistics (REFERENCE Part 7); omit for no feature-moment panels"
+    )
     s.set_defaults(func=cmd_rig_vs_real)

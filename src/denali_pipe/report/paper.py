@@ -82,6 +82,10 @@ REAL_CENTRE_ZONE = {
 # stores them, (1, 1) the centre), recovered from the release's trained 1D
 # CNNs' first BatchNorm (R^2 > 0.9996, the three checkpoints within 3 %).
 REAL_ZONE_MEANS = ((1330.0, 1960.0, 1620.0), (1880.0, 4970.0, 2350.0), (1340.0, 1900.0, 1570.0))
+# REFERENCE Part 7: each zone's mean of z = (log1p(counts) - 7.108) / 0.785
+# over bins and the real captures, recovered from the 15 log-input 1D CNNs'
+# first BatchNorm (each fit R^2 > 0.9997, the nets within 0.01 z).
+REAL_LOG_ZONE_MEANS = ((-0.196, 0.060, -0.035), (0.033, 0.401, 0.021), (-0.137, -0.017, -0.081))
 
 # Tables 7-9: the 1D CNN at 8x8 trained and tested within a condition
 # (conditions.py names them; `all` is the paper's "no conditioning" row).

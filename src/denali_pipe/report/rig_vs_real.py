@@ -12,12 +12,18 @@ return, direct peak, bump excess, FWHM). Each panel is zoomed, as the
 release's figures are, to the lower part of the direct peak. Below them,
 each zone's mean counts per bin over every capture of those object sets
 (all locations, repeats and bins) beside Part 5's, with the centre/edge and
-centre/corner ratios, the right/left column ratio and the pooled spread of
-log1p(counts).
+centre/corner ratios, the right/left column ratio, the pooled spread of
+log1p(counts) and each zone's mean of Part 7's log transform z beside the
+real one. When the release's feature statistics are given (config
+`rig_vs_real.feature_stats`), a panel per layer below holds Part 7's
+feature-moment distance of the same captures for each of the 18 release
+nets (`rig.feature_moments`); without them there are no such panels and the
+figure and the log say so.
 """
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +32,11 @@ import pandas as pd
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.io.store import open_set
-from denali_pipe.report.paper import REAL_CENTRE_ZONE, REAL_ZONE_MEANS
+from denali_pipe.report.paper import REAL_CENTRE_ZONE, REAL_LOG_ZONE_MEANS, REAL_ZONE_MEANS
+from denali_pipe.rig import feature_moments as fm
 from denali_pipe.rig.measure import measure
+
+log = logging.getLogger(__name__)
 
 CENTRE_ZONE = geo.centre_zone("3x3")
 # The panels show counts up to this fraction of the direct peak: the bump lives there.
@@ -50,10 +59,13 @@ COLUMNS = (
     "zone_col",
     "mean_counts",
     "real_mean_counts",
-)
+    "mean_z",
+    "real_mean_z",
+) + fm.COLUMNS
 # Source labels of the per-zone rows.
 ZONE_SOURCE = "capture source, every zone"
 REAL_ZONE_SOURCE = "real, every zone (release's models)"
+FEATURE_SOURCE = "capture source, feature moments"
 # The real captures' pooled spread of log1p(counts) (the release's generalisation checkpoints).
 REAL_LOG_SPREAD = 0.78
 
@@ -89,30 +101,39 @@ def zone_pattern(means: np.ndarray) -> dict:
     return {"centre/edge": means[1, 1] / edge, "centre/corner": means[1, 1] / corner, "column 2/column 0": means[:, 2].sum() / means[:, 0].sum()}
 
 
-def zone_means(paths: list[Path]) -> tuple[np.ndarray, float]:
-    """Mean counts per bin of every zone (3, 3) over every capture of the
-    stores at `paths` (locations, repeats, bins), and the pooled standard
-    deviation of log1p(counts) over them."""
-    total, n, logs, logs2 = 0.0, 0, 0.0, 0.0
-    for path in paths:
-        for _, h in open_set(path).iter_histograms():
-            h = h.astype(float)
-            total, n = total + h.sum(axis=(0, -1)), n + h.shape[0] * h.shape[-1]
-            lg = np.log1p(h)
-            logs, logs2 = logs + lg.sum(), logs2 + (lg**2).sum()
-    size = n * 9
-    return total / n, float(np.sqrt(logs2 / size - (logs / size) ** 2))
+def object_histograms(paths: list[Path]) -> np.ndarray:
+    """Every capture of the stores at `paths` (locations, repeats) as
+    (N, 9, N_BINS) int32 raw counts, zones row-major as stored."""
+    parts = [h.reshape(h.shape[0], -1, h.shape[-1]) for path in paths for _, h in open_set(path).iter_histograms()]
+    return np.concatenate(parts)
 
 
-def zone_rows(means: np.ndarray) -> list[dict]:
-    """The rig's zone means beside the real ones, then the real ones as their own rows."""
-    real = np.asarray(REAL_ZONE_MEANS)
+def zone_means(hist: np.ndarray) -> tuple[np.ndarray, float]:
+    """Mean counts per bin of every zone (3, 3) over captures (N, 9, N_BINS)
+    and bins, and the pooled standard deviation of log1p(counts) over them."""
+    return hist.mean(axis=(0, -1)).reshape(3, 3), float(np.log1p(hist.astype(float)).std())
+
+
+def zone_rows(means: np.ndarray, mean_z: np.ndarray) -> list[dict]:
+    """The rig's zone means (counts and Part 7's z) beside the real ones, then the real ones as their own rows."""
+    real, real_z = np.asarray(REAL_ZONE_MEANS), np.asarray(REAL_LOG_ZONE_MEANS)
     zones = [(r, c) for r in range(3) for c in range(3)]
-    rig = [{"source": ZONE_SOURCE, "zone_row": r, "zone_col": c, "mean_counts": means[r, c], "real_mean_counts": real[r, c]} for r, c in zones]
-    return rig + [{"source": REAL_ZONE_SOURCE, "zone_row": r, "zone_col": c, "mean_counts": real[r, c]} for r, c in zones]
+    rig = [
+        {
+            "source": ZONE_SOURCE,
+            "zone_row": r,
+            "zone_col": c,
+            "mean_counts": means[r, c],
+            "real_mean_counts": real[r, c],
+            "mean_z": mean_z[r, c],
+            "real_mean_z": real_z[r, c],
+        }
+        for r, c in zones
+    ]
+    return rig + [{"source": REAL_ZONE_SOURCE, "zone_row": r, "zone_col": c, "mean_counts": real[r, c], "mean_z": real_z[r, c]} for r, c in zones]
 
 
-def plot_zones(ax, means: np.ndarray, spread: float) -> None:
+def plot_zones(ax, means: np.ndarray, spread: float, mean_z: np.ndarray) -> None:
     """Grouped bars of each zone's mean counts, the rig's beside the real ones."""
     real = np.asarray(REAL_ZONE_MEANS)
     x = np.arange(9)
@@ -127,16 +148,45 @@ def plot_zones(ax, means: np.ndarray, spread: float) -> None:
     ax.set_ylim(0, 1.15 * max(means.max(), real.max()))
     rig, ref = zone_pattern(means), zone_pattern(real)
     words = "; ".join(f"{k} {rig[k]:.2f} (real {ref[k]:.2f})" for k in rig)
+    dz = (mean_z - np.asarray(REAL_LOG_ZONE_MEANS)).ravel()
+    zwords = " ".join(f"{d:+.2f}" for d in dz)
     ax.set_title(
-        f"Every zone's mean counts per bin over the object sets' captures (percentages: capture source against real)\n{words}; pooled log1p(counts) sd {spread:.2f} (real {REAL_LOG_SPREAD})",
+        f"Every zone's mean counts per bin over the object sets' captures (percentages: capture source against real)\n{words}; pooled log1p(counts) sd {spread:.2f} (real {REAL_LOG_SPREAD})\n"
+        f"zone means of z = (log1p(counts) - {fm.LOG_MEAN}) / {fm.LOG_STD}, capture source minus real (REFERENCE Part 7), zone by zone: {zwords}",
         fontsize=8,
     )
     ax.legend(fontsize=7, loc="upper right")
 
 
-def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path) -> pd.DataFrame:
+def plot_layer(ax, table: pd.DataFrame, layer: int) -> None:
+    """One layer's feature-moment distance per release net: the mean term
+    stacked under the variance term (0: the real moments)."""
+    t = table[table.layer == layer].sort_values(["input", "net"], ascending=[False, True])
+    x = np.arange(len(t))
+    ax.bar(x, t.mean_term, color="tab:blue", label="mean term")
+    ax.bar(x, t.var_term, bottom=t.mean_term, color="tab:orange", label="variance term")
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_xticks(x, [f"{n} ({i})" for n, i in zip(t.net, t.input)], rotation=90, fontsize=6)
+    ax.set_xlim(-0.6, len(t) - 0.4)
+    ax.set_ylim(0, 1.3 * t.distance.max())  # room for the legend
+    ax.set_ylabel("distance (0 = the real moments)")
+    by_input = t.groupby("input").distance.mean()
+    low = (t.var_log_ratio < 0).sum()
+    ax.set_title(
+        f"layer {layer}: distance {t.distance.mean():.2f} (raw-count nets {by_input.get('raw', np.nan):.2f}, log-input {by_input.get('log_z', np.nan):.2f})\n"
+        f"variance below the real in {low} of {len(t)} nets (median channel)",
+        fontsize=8,
+    )
+    ax.legend(fontsize=7, loc="upper right")
+
+
+def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path, feature_stats: Path | None = None) -> pd.DataFrame:
     """Measure each (object set store, NOOBJECT store) pair's centre zone and
-    plot it; write the PNG and the CSV (rig rows, then the real figures' rows)."""
+    plot it; every zone's mean counts and z over the object sets' captures;
+    with `feature_stats` (the folder of the release's backbones and BN
+    statistics), Part 7's feature-moment distance of those captures per net
+    and layer. Write the PNG and the CSV (rig rows, the real figures' rows,
+    the zone rows, then the feature rows)."""
     rows, panels = [], []
     for obj_path, bg_path in pairs:
         obj, bg = open_set(obj_path), open_set(bg_path)
@@ -149,15 +199,34 @@ def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path) ->
         m = measure(capture, background)
         rows.append({"source": "capture source", "set": obj.capture_set.name, "location": k, **m.to_dict()})
         panels.append((obj.capture_set, k, capture, background, m))
-    means, spread = zone_means([obj_path for obj_path, _ in pairs])
-    table = pd.DataFrame(rows + real_rows() + zone_rows(means)).reindex(columns=list(COLUMNS))
+    hist = object_histograms([obj_path for obj_path, _ in pairs])
+    means, spread = zone_means(hist)
+    mean_z = fm.log_zone_means(hist).reshape(3, 3)
+    if feature_stats is None:
+        features = pd.DataFrame(columns=list(fm.COLUMNS))
+        note = "feature-moment panels: none (config rig_vs_real.feature_stats is null)"
+        log.info("rig_vs_real.feature_stats is not configured: no feature-moment panels or rows")
+    else:
+        features = fm.feature_distances(fm.load_backbones(feature_stats), hist).assign(source=FEATURE_SOURCE)
+        yard = fm.summary(features)
+        note = (
+            f"feature-moment distance over {len(hist)} captures, 18 release nets x 3 layers: {yard['distance']:.2f} "
+            f"(layers 1 / 2 / 3: {yard['layer 1']:.2f} / {yard['layer 2']:.2f} / {yard['layer 3']:.2f}; raw-count nets' layer-1 variance term {yard['raw layer-1 var']:.2f})"
+        )
+        log.info(note)
+    table = pd.concat([pd.DataFrame(rows + real_rows() + zone_rows(means, mean_z)), features], ignore_index=True).reindex(columns=list(COLUMNS))
 
     ncols = min(2, len(panels))
     nrows = -(-len(panels) // ncols)
-    fig = plt.figure(figsize=(max(5.2 * ncols, 9.0), 3.6 * nrows + 3.6))
-    grid = fig.add_gridspec(nrows + 1, ncols, height_ratios=[1.0] * nrows + [0.95])
-    axes = np.array([[fig.add_subplot(grid[r, c]) for c in range(ncols)] for r in range(nrows)])
-    plot_zones(fig.add_subplot(grid[nrows, :]), means, spread)
+    extra = 0 if features.empty else 1
+    fig = plt.figure(figsize=(max(5.2 * ncols, 13.0 if extra else 9.0), 3.6 * nrows + 3.8 + 4.6 * extra))
+    grid = fig.add_gridspec(nrows + 1 + extra, 6, height_ratios=[1.0] * nrows + [1.0] + [1.25] * extra)
+    span = 6 // ncols
+    axes = np.array([[fig.add_subplot(grid[r, c * span : (c + 1) * span]) for c in range(ncols)] for r in range(nrows)])
+    plot_zones(fig.add_subplot(grid[nrows, :]), means, spread, mean_z)
+    if extra:
+        for i, layer in enumerate(fm.LAYERS):
+            plot_layer(fig.add_subplot(grid[nrows + 1, 2 * i : 2 * i + 2]), features, layer)
     bins = np.arange(geo.N_BINS)
     for ax in axes.flat[len(panels) :]:
         ax.set_visible(False)
@@ -180,7 +249,9 @@ def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path) ->
         ax.text(0.98, 0.97, text, transform=ax.transAxes, ha="right", va="top", fontsize=7, bbox=dict(fc="white", alpha=0.8, lw=0))
     axes[0][0].legend(fontsize=7, loc="center right")
     real = "\n".join(f"{name}: {real_summary(v)}" for name, v in REAL_CENTRE_ZONE.items())
-    fig.suptitle(f"Raw centre-zone histograms, zoomed to {ZOOM:.0%} of the direct peak. Real captures, read off the release's figures:\n{real}", fontsize=8)
+    fig.suptitle(
+        f"Raw centre-zone histograms, zoomed to {ZOOM:.0%} of the direct peak. Real captures, read off the release's figures:\n{real}\n{note}", fontsize=8
+    )
     fig.tight_layout()
     save_figure(fig, out_png, table, out_csv)
     return table
