@@ -185,6 +185,19 @@ TRAIN = config["train"]
 RUN_DIR = "results/runs/{protocol}/{res}/{condition}/{split}/{model}_{task}/seed{seed}"
 
 
+# Where the datasets a protocol's cells read live: `clean`'s are the preprocessed
+# features' (rules/preprocess.smk, rules/generalisation.smk), `paper`'s the raw
+# counts of the capture stores, as the reference trains (rules/train.smk;
+# train/paper_inputs.py).
+DATASET_DIRS = {"clean": "results/datasets", "paper": "results/datasets/paper"}
+
+
+def dataset_files(name, protocol=TRAIN["protocol"]):
+    """{x, table}: dataset `name` (`<res>`, or `<variant>_<res>` for a held-out variant) as `protocol`'s cells read it."""
+    d = DATASET_DIRS[protocol]
+    return {"x": f"{d}/{name}.zarr", "table": f"{d}/{name}.parquet"}
+
+
 def run_dirs(models, tasks, splits, res=TRAIN["resolution"]):
     """Benchmark cells (condition `all`) of the configured protocol and
     seeds at `res` (default: the tables' resolution); ill-posed (split,
@@ -338,12 +351,20 @@ def generalisation_inputs(figure):
     variant, tasks = GENERALISATION[figure]
     res = TRAIN["resolution"]
     dataset = f"{variant}_{res}"
+    files = dataset_files(dataset)
     return {
         "cells": run_files([BENCHMARK_MODEL], tasks, ["random"]),
         "evaluations": [d.replace("results/runs/", f"results/evaluations/{dataset}/") + ".json" for d in run_dirs([BENCHMARK_MODEL], tasks, ["random"])],
-        "variant_x": f"results/datasets/{dataset}.zarr",
-        "variant_table": f"results/datasets/{dataset}.parquet",
+        "variant_x": files["x"],
+        "variant_table": files["table"],
     }
+
+
+def paper_dataset_sets(dataset):
+    """(capture sets, variant) of a `paper` dataset: `<res>` is the benchmark's
+    base-object sets, `<variant>_<res>` a held-out variant's."""
+    variant, _, res = dataset.rpartition("_")
+    return (variant_sets(variant, res), variant) if variant else (benchmark_sets(res), "base")
 
 
 # Fig 9 trains the paper's 1D CNN (on the centre zone: experiments/fig9.py)
