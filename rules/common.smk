@@ -12,7 +12,7 @@ from pathlib import Path
 import pandas as pd
 
 from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
-from denali_pipe.train.cells import LINEAR, SPLITS, TASKS, is_ill_posed, uses_gpu
+from denali_pipe.train.cells import DATASET_DIRS, LINEAR, SPLITS, TASKS, is_ill_posed, uses_gpu
 from denali_pipe.workflow.costs import combine, cost_model, frame_pixels, gpu_speedup, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
 from denali_pipe.train.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.train.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
@@ -185,16 +185,12 @@ TRAIN = config["train"]
 RUN_DIR = "results/runs/{protocol}/{res}/{condition}/{split}/{model}_{task}/seed{seed}"
 
 
-# Where the datasets a protocol's cells read live: `clean`'s are the preprocessed
-# features' (rules/preprocess.smk, rules/generalisation.smk), `paper`'s the raw
-# counts of the capture stores, as the reference trains (rules/train.smk;
-# train/paper_inputs.py).
-DATASET_DIRS = {"clean": "results/datasets", "paper": "results/datasets/paper"}
-
-
 def dataset_files(name, protocol=TRAIN["protocol"]):
-    """{x, table}: dataset `name` (`<res>`, or `<variant>_<res>` for a held-out variant) as `protocol`'s cells read it."""
-    d = DATASET_DIRS[protocol]
+    """{x, table}: dataset `name` (`<res>`, or `<variant>_<res>` for a held-out
+    variant) as `protocol`'s cells read it (cells.DATASET_DIRS): `clean`'s are
+    the preprocessed features' (rules/preprocess.smk, rules/generalisation.smk),
+    `paper`'s the raw counts of the capture stores (rules/train.smk)."""
+    d = f"results/{DATASET_DIRS[protocol]}"
     return {"x": f"{d}/{name}.zarr", "table": f"{d}/{name}.parquet"}
 
 

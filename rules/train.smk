@@ -41,8 +41,8 @@ rule paper_dataset:
         positions="results/calibration/tag1_positions.parquet",
         sheet=config["objects_sheet"],
     output:
-        x=directory(f"{DATASET_DIRS['paper']}/{{dataset}}.zarr"),
-        table=f"{DATASET_DIRS['paper']}/{{dataset}}.parquet",
+        x=directory(f"results/{DATASET_DIRS['paper']}/{{dataset}}.zarr"),
+        table=f"results/{DATASET_DIRS['paper']}/{{dataset}}.parquet",
     log:
         "logs/datasets/paper/{dataset}.log",
     wildcard_constraints:
