@@ -145,7 +145,7 @@ def main() -> None:
             print(pd.DataFrame(rows[-1:]).round(4).to_string(index=False, header=len(rows) == 1), flush=True)
     df = pd.DataFrame(rows)
     summary = df.groupby("metric", sort=False)[["ours", "reference"]].agg(["mean", "std"])
-    summary["difference"] = summary[("ours", "mean")] - summary[("reference", "mean")]
+    summary[("difference", "of means")] = summary[("ours", "mean")] - summary[("reference", "mean")]
     print("\nmean and std over seeds", args.seeds)
     print(summary.round(4).to_string())
 
