@@ -13,7 +13,7 @@ import pandas as pd
 
 from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
 from denali_pipe.rig import feature_moments
-from denali_pipe.train.cells import LINEAR, SPLITS, TASKS, is_ill_posed, uses_gpu
+from denali_pipe.train.cells import DATASET_DIRS, LINEAR, SPLITS, TASKS, is_ill_posed, uses_gpu
 from denali_pipe.workflow.costs import combine, cost_model, frame_pixels, gpu_speedup, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
 from denali_pipe.train.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.train.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
@@ -197,6 +197,15 @@ TRAIN = config["train"]
 RUN_DIR = "results/runs/{protocol}/{res}/{condition}/{split}/{model}_{task}/seed{seed}"
 
 
+def dataset_files(name, protocol=TRAIN["protocol"]):
+    """{x, table}: dataset `name` (`<res>`, or `<variant>_<res>` for a held-out
+    variant) as `protocol`'s cells read it (cells.DATASET_DIRS): `clean`'s are
+    the preprocessed features' (rules/preprocess.smk, rules/generalisation.smk),
+    `paper`'s the raw counts of the capture stores (rules/train.smk)."""
+    d = f"results/{DATASET_DIRS[protocol]}"
+    return {"x": f"{d}/{name}.zarr", "table": f"{d}/{name}.parquet"}
+
+
 def run_dirs(models, tasks, splits, res=TRAIN["resolution"]):
     """Benchmark cells (condition `all`) of the configured protocol and
     seeds at `res` (default: the tables' resolution); ill-posed (split,
@@ -350,12 +359,20 @@ def generalisation_inputs(figure):
     variant, tasks = GENERALISATION[figure]
     res = TRAIN["resolution"]
     dataset = f"{variant}_{res}"
+    files = dataset_files(dataset)
     return {
         "cells": run_files([BENCHMARK_MODEL], tasks, ["random"]),
         "evaluations": [d.replace("results/runs/", f"results/evaluations/{dataset}/") + ".json" for d in run_dirs([BENCHMARK_MODEL], tasks, ["random"])],
-        "variant_x": f"results/datasets/{dataset}.zarr",
-        "variant_table": f"results/datasets/{dataset}.parquet",
+        "variant_x": files["x"],
+        "variant_table": files["table"],
     }
+
+
+def paper_dataset_sets(dataset):
+    """(capture sets, variant) of a `paper` dataset: `<res>` is the benchmark's
+    base-object sets, `<variant>_<res>` a held-out variant's."""
+    variant, _, res = dataset.rpartition("_")
+    return (variant_sets(variant, res), variant) if variant else (benchmark_sets(res), "base")
 
 
 # Fig 9 trains the paper's 1D CNN (on the centre zone: experiments/fig9.py)

@@ -24,8 +24,8 @@ rule evaluate:
     input:
         model=f"{RUN_DIR}/model.pt",
         metrics=f"{RUN_DIR}/metrics.json",
-        x="results/datasets/{dataset}.zarr",
-        table="results/datasets/{dataset}.parquet",
+        x=lambda w: dataset_files(w.dataset, w.protocol)["x"],
+        table=lambda w: dataset_files(w.dataset, w.protocol)["table"],
     output:
         EVALUATION,
     log:
@@ -41,8 +41,8 @@ rule evaluate:
 rule fig10:
     input:
         **generalisation_inputs("fig10"),
-        base_x=f"results/datasets/{TRAIN['resolution']}.zarr",
-        base_table=f"results/datasets/{TRAIN['resolution']}.parquet",
+        base_x=dataset_files(TRAIN["resolution"])["x"],
+        base_table=dataset_files(TRAIN["resolution"])["table"],
     output:
         png=report("results/fig10.png", caption="../report/fig10.rst", category="6. Generalisation"),
         csv="results/fig10.csv",

@@ -1,12 +1,14 @@
 # Training cells: one job per model x task x split x resolution x protocol x seed.
 # A cell gets only its own settings as JSON, so changing one model's
-# hyperparameters reruns only that model's cells and the tables.
+# hyperparameters reruns only that model's cells and the tables. `clean` cells
+# read the preprocessed features' datasets; `paper` cells the raw counts of the
+# capture stores, as the reference trains (paper_dataset; dataset_files).
 
 
 rule train:
     input:
-        x="results/datasets/{res}.zarr",
-        table="results/datasets/{res}.parquet",
+        x=lambda w: dataset_files(w.res, w.protocol)["x"],
+        table=lambda w: dataset_files(w.res, w.protocol)["table"],
     output:
         metrics=f"{RUN_DIR}/metrics.json",
         curves=f"{RUN_DIR}/curves.csv",
@@ -31,3 +33,22 @@ rule train:
     shell:
         "{DENALI} train {input.x} --table {input.table} --cell {params.cell} --hyper {params.hyper} {params.factory}"
         " --validation-fraction {params.validation} {params.budget} --threads {threads} --precision {params.precision} --outdir {params.outdir} > {log} 2>&1"
+
+
+rule paper_dataset:
+    input:
+        stores=lambda w: [store(name) for name in paper_dataset_sets(w.dataset)[0]],
+        positions="results/calibration/tag1_positions.parquet",
+        sheet=config["objects_sheet"],
+    output:
+        x=directory(f"results/{DATASET_DIRS['paper']}/{{dataset}}.zarr"),
+        table=f"results/{DATASET_DIRS['paper']}/{{dataset}}.parquet",
+    log:
+        "logs/datasets/paper/{dataset}.log",
+    wildcard_constraints:
+        dataset=rf"(({'|'.join(HELD_OUT)})_)?(3x3|8x8)",
+    params:
+        variant=lambda w: paper_dataset_sets(w.dataset)[1],
+    shell:
+        "{DENALI} paper-dataset {input.stores} --variant {params.variant} --positions {input.positions} --objects-sheet {input.sheet}"
+        " --out {output.x} --table {output.table} > {log} 2>&1"

@@ -9,8 +9,8 @@ rule tsne:
     input:
         models=lambda w: run_files([BENCHMARK_MODEL], ["shape"], ["random"], "model.pt", TSNE_RESOLUTION[w.fig]),
         metrics=lambda w: run_files([BENCHMARK_MODEL], ["shape"], ["random"], "metrics.json", TSNE_RESOLUTION[w.fig]),
-        x=lambda w: f"results/datasets/{TSNE_RESOLUTION[w.fig]}.zarr",
-        table=lambda w: f"results/datasets/{TSNE_RESOLUTION[w.fig]}.parquet",
+        x=lambda w: dataset_files(TSNE_RESOLUTION[w.fig])["x"],
+        table=lambda w: dataset_files(TSNE_RESOLUTION[w.fig])["table"],
     output:
         png=report("results/{fig}.png", caption="../report/tsne.rst", category="7. Embeddings"),
         csv="results/{fig}.csv",

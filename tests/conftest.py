@@ -5,6 +5,8 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 ASSETS = REPO.parent / "shared" / "denali-assets"
+# The release's own benchmark code (MIT): tests compare against it; the project never imports it.
+REFERENCE = REPO.parent / "shared" / "reference" / "benchmark"
 
 
 @pytest.fixture(scope="session")

@@ -17,7 +17,7 @@ from denali_pipe.core.geometry import N_LOCATIONS, gantry_row_col
 from denali_pipe.explore.app import pick_choice, pick_set
 from denali_pipe.explore.capture import Calibration, gantry_grid
 from denali_pipe.explore.figures import histogram_grid, title
-from denali_pipe.explore.outputs import CellChoice, scan
+from denali_pipe.explore.outputs import CellChoice, dataset_paths, scan
 from denali_pipe.explore.predictions import error_by_location
 from denali_pipe.poses.pnp import project
 from denali_pipe.train.dataset import write_dataset
@@ -84,12 +84,13 @@ def test_markers_project_through_the_camera_at_the_frames_size():
     assert np.allclose(cal.pixels(points, (1280, 720)), 2 * project(K, R, t, points))  # the principal point scales too
 
 
-@pytest.mark.parametrize("task", ["location", "shape"])
-def test_the_per_location_test_error_recombines_to_the_cells_test_metric(tmp_path, data, task):  # noqa: F811
+@pytest.mark.parametrize("task, protocol", [("location", "clean"), ("shape", "clean"), ("location", "paper")])
+def test_the_per_location_test_error_recombines_to_the_cells_test_metric(tmp_path, data, task, protocol):  # noqa: F811
+    """On the dataset of the cell's protocol (a paper cell's is under datasets/paper/)."""
     x, samples = data
     results = tmp_path / "results"
-    write_dataset(x, samples, results / "datasets/3x3.zarr", results / "datasets/3x3.parquet", crop_start=0)
-    cell = _cell(task=task)
+    write_dataset(x, samples, *(results / p for p in dataset_paths("3x3", protocol)), crop_start=0)
+    cell = _cell(task=task, protocol=protocol)
     result = run_cell(
         x, samples, cell, Hyper(lr=3e-3, epochs=2, batch_size=32, norm="raw"), validation_fraction=0.2, factory=f"denali_pipe.train.models:{cell.model}"
     )

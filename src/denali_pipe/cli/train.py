@@ -1,4 +1,4 @@
-"""`denali` verbs of one training cell (rules/train.smk)."""
+"""`denali` verbs of one training cell and of the `paper` protocol's inputs (rules/train.smk)."""
 
 from __future__ import annotations
 
@@ -49,7 +49,29 @@ def cmd_train(args: argparse.Namespace) -> None:
     log.info("wrote %s: test %s, %.1f s training (%.0f samples/s)", args.outdir, m.test, m.train_seconds, m.train_samples_per_second)
 
 
+def cmd_paper_dataset(args: argparse.Namespace) -> None:
+    import pandas as pd
+
+    from denali_pipe.core.objects import load_catalogue
+    from denali_pipe.train.dataset import location_labels, write_dataset
+    from denali_pipe.train.paper_inputs import paper_samples
+
+    x, samples = paper_samples(
+        [Path(p) for p in args.stores], load_catalogue(args.objects_sheet), location_labels(pd.read_parquet(args.positions)), args.variant
+    )
+    write_dataset(x, samples, Path(args.out), Path(args.table), crop_start=0)
+    log.info("wrote %s %s and %s", args.out, x.shape, args.table)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
+    s = sub.add_parser("paper-dataset", help="the paper protocol's samples: every repeat's raw counts from the capture stores, in the reference's order")
+    s.add_argument("stores", nargs="+", help="store/<set>.zarr of one resolution")
+    s.add_argument("--variant", default="base", help="the objects' variant (objects.VARIANTS): base (the benchmark), italic or nonrr")
+    s.add_argument("--positions", required=True, help="calibration/tag1_positions.parquet (location labels)")
+    s.add_argument("--objects-sheet", required=True, help="objects.tsv")
+    s.add_argument("--out", required=True, help="output datasets/paper/<name>.zarr (array x)")
+    s.add_argument("--table", required=True, help="output datasets/paper/<name>.parquet (one row per sample)")
+    s.set_defaults(func=cmd_paper_dataset)
     s = sub.add_parser("train", help="train and evaluate one cell (model x task x split x resolution x condition x protocol x seed)")
     s.add_argument("dataset", help="datasets/<res>.zarr")
     s.add_argument("--table", required=True, help="datasets/<res>.parquet")

@@ -242,7 +242,8 @@ class Outputs:
 
 
 def cell_outputs(inv: Inventory, sel: Selection, choice: CellChoice | None) -> Outputs:
-    """The choice's location, shape and size cells on the selected repeat's features."""
+    """The choice's location, shape and size cells on the selected repeat's
+    input: its features (clean), or its raw counts (paper, as those cells train)."""
     res = sel.cs.resolution
     if sel.cs.is_background:
         return Outputs.none(Missing("a background set: nothing to predict", ""))
@@ -253,9 +254,12 @@ def cell_outputs(inv: Inventory, sel: Selection, choice: CellChoice | None) -> O
         seed = min(c.seed for c, _ in inv.cells)
         run = CellChoice(START["protocol"], res, START["split"], START["model"], seed).run_path(TASKS[0])
         return Outputs.none(Missing(f"no training cell at {res}", target(f"{run}/metrics.json") + " (and likewise the shape and size cells)"))
-    if sel.cs.name not in inv.features:
+    if choice.protocol == "paper":
+        x = cap.raw_histograms(cap.capture_store(inv, sel.cs), sel.location)[sel.repeat].astype(np.float32)
+    elif sel.cs.name not in inv.features:
         return Outputs.none(Missing(f"no features for {sel.cs.name} (the models' input)", target(features_path(sel.cs.name))))
-    x = cap.capture_features(inv, sel.cs, sel.location)[0][sel.repeat]
+    else:
+        x = cap.capture_features(inv, sel.cs, sel.location)[0][sel.repeat]
     out = Outputs({}, {}, {})
     for task in TASKS:
         status = inv.cell_status(choice, task)
@@ -376,7 +380,7 @@ def grid_panel(inv: Inventory, sel: Selection, choice: CellChoice | None, heat: 
     cal = cap.read_calibration(inv)
     grid = cap.gantry_grid(cal.positions)
     error, label, detail = None, "", f"no {heat} test error"
-    if choice is not None and inv.cell_status(choice, heat) is None and choice.resolution in inv.datasets:
+    if choice is not None and inv.cell_status(choice, heat) is None and (choice.protocol, choice.resolution) in inv.datasets:
         _, name, unit = ERROR_METRIC[heat]
         error, label = error_by_location(inv, choice, heat), f"{name} ({unit})"
         detail = f"colour: the {choice.model} {heat} cell's test {name} per location ({choice.split}, seed {choice.seed})"
@@ -508,8 +512,8 @@ def build_app(root: Path) -> Dash:
         notes = list(dict.fromkeys(outputs.missing.values()))
         if not inv.calibrated:
             notes.append(Missing("no calibration", target(POSITIONS)))
-        if choice is not None and res not in inv.datasets and not sel.cs.is_background:
-            notes.append(Missing(f"no {res} dataset for the per-location test error", target(dataset_paths(res)[0])))
+        if choice is not None and (choice.protocol, res) not in inv.datasets and not sel.cs.is_background:
+            notes.append(Missing(f"no {res} {choice.protocol} dataset for the per-location test error", target(dataset_paths(res, choice.protocol)[0])))
         if not (inv.root / crop_path(res)).is_file():
             notes.append(Missing(f"no {res} crop window", target(crop_path(res))))
         shape_truth = None if sel.cs.is_background else cap.object_class(inv, sel.cs)

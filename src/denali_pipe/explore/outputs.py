@@ -16,7 +16,7 @@ import pandas as pd
 
 from denali_pipe.core.capture_sets import CaptureSet, parse_set_name
 from denali_pipe.core.geometry import RESOLUTIONS
-from denali_pipe.train.cells import ALL, TASKS, is_ill_posed
+from denali_pipe.train.cells import ALL, DATASET_DIRS, PROTOCOLS, TASKS, is_ill_posed
 from denali_pipe.train.saved_cell import MODEL_FILE
 
 ZARR = ".zarr"
@@ -38,9 +38,11 @@ def target(rel: str) -> str:
     return f"snakemake --cores all results/{rel}"
 
 
-def dataset_paths(res: str) -> tuple[str, str]:
-    """(features array, sample table) of the benchmark dataset at a resolution, relative to results/."""
-    return f"datasets/{res}{ZARR}", f"datasets/{res}.parquet"
+def dataset_paths(res: str, protocol: str = PROTOCOLS[0]) -> tuple[str, str]:
+    """(input array, sample table) of the benchmark dataset at a resolution that
+    `protocol`'s cells train on (features under clean, raw counts under paper), relative to results/."""
+    d = DATASET_DIRS[protocol]
+    return f"{d}/{res}{ZARR}", f"{d}/{res}.parquet"
 
 
 def crop_path(res: str) -> str:
@@ -97,7 +99,7 @@ class Inventory:
     sets: tuple[CaptureSet, ...]  # capture stores, by name
     features: frozenset[str]  # set names with a features store
     twins: frozenset[tuple[str, str]]  # (object, size)
-    datasets: frozenset[str]  # resolutions with both dataset files
+    datasets: frozenset[tuple[str, str]]  # (protocol, resolution) with both dataset files
     cells: frozenset[tuple[CellChoice, str]]  # (choice, task) with a saved model
     calibrated: bool  # tag-1 positions and scene.json
     transforms: bool
@@ -130,7 +132,7 @@ class Inventory:
         if not self.calibrated:
             out.append(Missing("no calibration (tag-1 positions and tracking camera)", target(POSITIONS)))
         objects = [s for s in self.sets if not s.is_background]
-        for res in sorted({s.resolution for s in objects} - self.datasets):
+        for res in sorted({s.resolution for s in objects} - {r for _, r in self.datasets}):
             out.append(Missing(f"no {res} benchmark dataset (per-location test error)", target(dataset_paths(res)[0])))
         no_features = sorted(s.name for s in objects if s.name not in self.features)
         if no_features:
@@ -172,7 +174,7 @@ def scan(root: Path) -> Inventory:
             sets.append(parse_set_name(name))
         except ValueError:
             continue  # not a capture store of the workflow's naming: not ours to show
-    datasets = frozenset(res for res in RESOLUTIONS if all((root / p).exists() for p in dataset_paths(res)))
+    datasets = frozenset((p, res) for p in PROTOCOLS for res in RESOLUTIONS if all((root / f).exists() for f in dataset_paths(res, p)))
     twins = set()
     for name in _zarr_names(root / TWINS):
         obj, _, size = name.rpartition("_")
@@ -197,7 +199,7 @@ def _dataset_objects(table: Path, mtime_ns: int) -> frozenset[str]:
 def benchmark_objects(inv: Inventory) -> frozenset[str] | None:
     """The objects of the benchmark datasets (the catalogue's base objects:
     the dataset takes no other), or None when no dataset says."""
-    tables = [inv.path(dataset_paths(res)[1]) for res in sorted(inv.datasets)]
+    tables = [inv.path(dataset_paths(res, p)[1]) for p, res in sorted(inv.datasets)]
     if not tables:
         return None
     return frozenset().union(*(_dataset_objects(t, t.stat().st_mtime_ns) for t in tables))

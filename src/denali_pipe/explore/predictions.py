@@ -76,5 +76,5 @@ def error_by_location(inv: Inventory, choice: CellChoice, task: str) -> pd.DataF
     `n` test samples; locations without test samples are absent. Computed
     once per saved model and dataset."""
     run_dir = inv.path(choice.run_path(task))
-    x_path, table_path = (inv.path(p) for p in dataset_paths(choice.resolution))
+    x_path, table_path = (inv.path(p) for p in dataset_paths(choice.resolution, choice.protocol))
     return _error_by_location(run_dir, x_path, table_path, (_stamp(run_dir / MODEL_FILE), _stamp(x_path), _stamp(table_path)))

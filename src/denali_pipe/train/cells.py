@@ -10,6 +10,9 @@ LINEAR = "linear"  # the classical reference model (classical.py)
 TASKS = ("location", "shape", "size")
 SPLITS = ("random", "repeats_grouped", "location_held_out", "shape_held_out", "size_held_out")
 PROTOCOLS = ("clean", "paper")
+# Where a protocol's cells find their datasets, under results/: `clean` trains on the
+# preprocessed features' (dataset.py), `paper` on the stores' raw counts (paper_inputs.py).
+DATASET_DIRS = {"clean": "datasets", "paper": "datasets/paper"}
 # The dtypes a network can train in (config train.precision; train.training_precision).
 PRECISIONS = ("auto", "float32", "bfloat16")
 # The condition of a cell that trains and tests on every sample (conditions.py has the others).

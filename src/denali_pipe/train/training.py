@@ -3,9 +3,11 @@ and `fit`, the one training loop that the cells and every experiment that
 trains a network (Fig 9, the jitter sweep) go through.
 
 Two protocols:
-- `paper`: as the reference does it: normalisation statistics over all
-  samples, every epoch evaluated on the test split and the best test epoch
-  kept. Kept for comparability with the paper's numbers; it leaks.
+- `paper`: as the reference does it: raw counts of every zone and bin
+  (paper_inputs.py; the DAG hands its cells those samples), its transform
+  with statistics over all samples, every epoch evaluated on the test split
+  and the best test epoch kept. Kept for comparability with the paper's
+  numbers; it leaks.
 - `clean` (default): a validation part is carved out of the training split
   (the same kind of hold-out as the split itself), normalisation statistics
   come from the remaining training part only, the best validation epoch is
@@ -35,6 +37,7 @@ from tqdm import tqdm
 
 from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train import metrics as M
+from denali_pipe.train import paper_inputs
 from denali_pipe.train.cell_metrics import CellMetrics
 from denali_pipe.train.cells import PRECISIONS, PROTOCOLS, TASKS, Cell
 from denali_pipe.train.models import forward_flops, n_params
@@ -287,9 +290,13 @@ def run_cell(
     y, classes = targets(samples, cell.task)
     split, val = partition(samples, y, cell, validation_fraction)
 
-    # normalisation statistics: training part only (clean) or everything (paper)
-    _, stats = normalise(x if cell.protocol == "paper" else x[split.train], hp.norm)
-    xn = torch.from_numpy(normalise(x, hp.norm, stats)[0])
+    # normalisation statistics: training part only (clean), or everything with the reference's own arithmetic (paper)
+    if cell.protocol == "paper":
+        xn, stats = paper_inputs.transform(x, hp.norm)
+    else:
+        _, stats = normalise(x[split.train], hp.norm)
+        xn = normalise(x, hp.norm, stats)[0]
+    xn = torch.from_numpy(xn)
     yt = torch.from_numpy(np.array(y))  # pandas hands out read-only views
     n_classes = 2 if cell.task == "location" else len(classes)
 
