@@ -154,7 +154,11 @@ def infer(model: nn.Module, x: torch.Tensor, device: torch.device | str = "cpu",
 
 
 def task_metrics(task: str, out: np.ndarray, y: np.ndarray) -> dict:
-    return M.regression_metrics(out, y) if task == "location" else M.classification_metrics(out, y)
+    """A cell's metrics of outputs `out` against labels `y`: location's errors
+    and how many predictions leave the gantry's workspace; the classifiers'."""
+    if task == "location":
+        return {**M.regression_metrics(out, y), **M.workspace_metrics(out)}
+    return M.classification_metrics(out, y)
 
 
 def selection_key(task: str) -> tuple[str, int]:
