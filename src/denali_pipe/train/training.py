@@ -252,7 +252,9 @@ def fit(
                 break
         # A NaN or inf loss has already poisoned the weights: no later epoch, and no metric, can be trusted.
         if not torch.isfinite(total):
-            raise ValueError(f"{name}: the loss diverged ({total.item()}) in epoch {epoch}; its learning rate {hp.lr:g} is too high for these inputs")
+            raise ValueError(
+                f"{name}: the loss diverged ({total.item()}) in epoch {epoch}; lower the learning rate (lr {hp.lr:g}) or check the inputs for non-finite values"
+            )
         train_seconds += time.perf_counter() - t0
         score = None
         if evaluate_epoch is not None:
