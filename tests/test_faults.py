@@ -2,6 +2,10 @@
 tiny preset (`workflow.REDUCED`): one capture set's rig job and its ingest.
 
 - a second run in a folder a run holds is refused with Snakemake's lock message;
+- one job killed (SIGKILL) mid-write: the run fails, leaving none of that job's
+  outputs, and the rerun redoes it and clears its temporary;
+- a file-size limit hit while a store is written: the job fails, no store
+  (whole or partial) is left, and a rerun completes;
 - Snakemake killed (SIGKILL) mid-job: its warm-start server follows it out,
   the rerun is refused until `--unlock`, then completes with the bytes of an
   uninterrupted run;
@@ -13,13 +17,15 @@ tiny preset (`workflow.REDUCED`): one capture set's rig job and its ingest.
 from __future__ import annotations
 
 import os
+import resource
 import shutil
 import signal
+import subprocess
 import time
 from pathlib import Path
 
 import pytest
-from workflow import copy_workflow, reduced_configfiles, snakemake, start_snakemake
+from workflow import copy_workflow, reduced_configfiles, snakemake, snakemake_command, start_snakemake
 
 from denali_pipe.cli.warm_start import ENV, worker_usage
 
@@ -135,6 +141,57 @@ def test_snakemake_killed_mid_job_then_rerun_writes_the_same_bytes(reference, tm
     refused = snakemake(wd, *run_args(wd), check=False)
     assert refused.returncode != 0 and LOCK_MESSAGE in refused.stdout + refused.stderr and "--unlock" in refused.stdout + refused.stderr
     snakemake(wd, "--unlock", *run_args(wd))
+    snakemake(wd, *run_args(wd))
+    assert outputs(wd) == outputs(reference[0])
+
+
+def job_processes(wd: Path, verb: str) -> list[int]:
+    """The `denali <verb>` job processes running in `wd` (their working directory names the run's)."""
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            cmd = (proc / "cmdline").read_bytes().split(b"\0")
+            cwd = Path(os.readlink(proc / "cwd"))
+        except (OSError, ValueError):
+            continue
+        if cwd == wd and cmd[1:4] == [b"-m", b"denali_pipe.cli", verb.encode()]:
+            pids.append(int(proc.name))
+    return pids
+
+
+def debris(wd: Path) -> list[str]:
+    """Temporary outputs (`core.atomic`'s .<name>.tmp-<pid> / .old-<pid>) left beside the outputs."""
+    return sorted(
+        str(p.relative_to(wd)) for d in ("data/raw", "results/store", "results/index") for p in (wd / d).glob(".*") if ".tmp-" in p.name or ".old-" in p.name
+    )
+
+
+def test_a_killed_job_fails_its_run_and_the_rerun_redoes_it(reference, tmp_path):
+    wd = copy_workflow(tmp_path)
+    run = start_snakemake(wd, *run_args(wd))
+    # killed mid-write: its capture set half written under its temporary name
+    wait_for(lambda: debris(wd), "rig job's temporary output", run)
+    for pid in job_processes(wd, "rig"):
+        os.kill(pid, signal.SIGKILL)
+    assert run.wait(timeout=WAIT_S) != 0
+    assert not (wd / OUTPUTS[0]).exists() and not (wd / TARGET).exists()
+    snakemake(wd, *run_args(wd))
+    assert outputs(wd) == outputs(reference[0])
+    assert debris(wd) == []  # the redone job cleared what the killed one left
+
+
+def test_a_file_size_limit_hit_in_a_store_write_fails_the_job_leaves_no_store_and_a_rerun_completes(reference, tmp_path):
+    wd = tmp_path / "wd"
+    shutil.copytree(reference[0], wd, symlinks=True)
+    # 256 KiB: a store's frame chunks are ~0.5 MB; the run's own files (logs, Snakemake's records) stay below
+    limit = 256 * 1024
+    command, env = snakemake_command(*run_args(wd, options=("--forcerun", "ingest")))
+    limited = subprocess.run(
+        command, cwd=wd, env=env, capture_output=True, text=True, preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    )
+    assert limited.returncode != 0, limited.stdout[-2000:]
+    assert "File too large" in (wd / INGEST_LOG).read_text()
+    assert not (wd / OUTPUTS[1]).exists() and not (wd / TARGET).exists() and debris(wd) == []
     snakemake(wd, *run_args(wd))
     assert outputs(wd) == outputs(reference[0])
 

@@ -59,7 +59,7 @@ def reduced_configfiles(workdir: Path, **settings) -> tuple[str, ...]:
     return ("--configfile", "config/presets/tiny.yaml", "reduced.yaml")
 
 
-def _snakemake_command(*args: str, env: dict[str, str] | None = None) -> tuple[list[str], dict[str, str]]:
+def snakemake_command(*args: str, env: dict[str, str] | None = None) -> tuple[list[str], dict[str, str]]:
     """The venv's snakemake by its path with `args`, and the environment
     (`env` or this one) with the venv left OFF PATH (as for a user who never
     activated it): the rules must reach the project through the interpreter
@@ -71,8 +71,8 @@ def _snakemake_command(*args: str, env: dict[str, str] | None = None) -> tuple[l
 
 
 def snakemake(workdir: Path, *args: str, check: bool = True, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    """Run snakemake (`_snakemake_command`) in `workdir` to its end."""
-    command, env = _snakemake_command(*args, env=env)
+    """Run snakemake (`snakemake_command`) in `workdir` to its end."""
+    command, env = snakemake_command(*args, env=env)
     proc = subprocess.run(command, cwd=workdir, env=env, capture_output=True, text=True)
     if check and proc.returncode != 0:
         raise AssertionError(f"snakemake {' '.join(args)} failed ({proc.returncode}):\n{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}")
@@ -80,9 +80,9 @@ def snakemake(workdir: Path, *args: str, check: bool = True, env: dict[str, str]
 
 
 def start_snakemake(workdir: Path, *args: str) -> subprocess.Popen:
-    """Start snakemake (`_snakemake_command`) in `workdir` and return at once;
+    """Start snakemake (`snakemake_command`) in `workdir` and return at once;
     its output goes to `workdir`/snakemake.out."""
-    command, env = _snakemake_command(*args)
+    command, env = snakemake_command(*args)
     with open(workdir / "snakemake.out", "w") as out:
         return subprocess.Popen(command, cwd=workdir, env=env, stdout=out, stderr=subprocess.STDOUT, text=True)
 
