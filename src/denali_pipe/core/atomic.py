@@ -8,6 +8,7 @@ same output removes the temporaries of writers no longer alive.
 
 from __future__ import annotations
 
+import glob
 import os
 import shutil
 from contextlib import contextmanager
@@ -24,8 +25,8 @@ def _alive(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:
-        return True
+    except PermissionError:  # alive, another user's
+        pass
     return True
 
 
@@ -33,7 +34,7 @@ def _clear_stale(path: Path) -> None:
     """Remove the temporaries (.<name>.tmp-<pid>, .<name>.old-<pid>) that
     writers of `path` on this machine left when killed: their pid is gone."""
     for kind in ("tmp", "old"):
-        for stale in path.parent.glob(f".{path.name}.{kind}-*"):
+        for stale in path.parent.glob(f".{glob.escape(path.name)}.{kind}-*"):
             pid = stale.name.rsplit("-", 1)[1]
             if not pid.isdigit() or _alive(int(pid)):
                 continue
