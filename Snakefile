@@ -29,6 +29,7 @@ include: "rules/fig9.smk"
 include: "rules/generalisation.smk"
 include: "rules/tsne.smk"
 include: "rules/jitter.smk"
+include: "rules/stability.smk"
 
 
 rule all:

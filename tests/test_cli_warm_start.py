@@ -156,6 +156,20 @@ def test_the_server_exits_with_its_owner(tmp_path):
     assert not socket_path.exists()
 
 
+def test_stop_leaves_a_socket_it_did_not_make_alone(tmp_path, monkeypatch):
+    """A run with the warm start off ends with `stop` too: a socket named in
+    the environment it inherited (a crashed run's, or anything a shell set)
+    is not its to remove, nor is the folder around it."""
+    inherited = tmp_path / "inherited" / "socket"
+    inherited.parent.mkdir()
+    inherited.touch()
+    (inherited.parent / "other file").touch()
+    monkeypatch.setenv(warm_start.ENV, str(inherited))
+    warm_start.start(False, tmp_path / "warm_start.log")
+    warm_start.stop()
+    assert inherited.exists() and (inherited.parent / "other file").exists() and os.environ[warm_start.ENV] == str(inherited)
+
+
 def test_a_training_cell_run_warm_writes_what_it_writes_afresh(tmp_path):
     """The real server (PRELOAD imported) against a fresh interpreter, on one
     small cell: the same metrics, curves and weights."""

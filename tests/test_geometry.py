@@ -44,6 +44,24 @@ def test_grid_matches_release_labels():
     assert np.abs(err.mean(0)).max() < 0.005
 
 
+@pytest.mark.skipif(not (ASSETS / "tag1_positions.json").exists(), reason="denali-assets not present")
+def test_the_release_labels_lie_in_the_workspace_only_with_its_margin():
+    labels = json.loads((ASSETS / "tag1_positions.json").read_text())
+    real = np.array([labels[f"frame{k}_tag1"] for k in range(100)])[:, :2] - TAG1_POSITIONS_OFFSET[:2]
+    assert geo.outside_workspace(real).max() == 0.0
+    # without it, the reference tracking's bias puts some a centimetre beyond the design grid's box
+    assert 0.005 < geo.outside_workspace(real, margin=0.0).max() < geo.WORKSPACE_MARGIN
+
+
+def test_outside_workspace_is_the_distance_beyond_the_box():
+    lo, hi = geo.gantry_workspace()
+    centre = (lo + hi) / 2
+    assert hi - lo == pytest.approx(np.full(2, 9 * 0.0365 + 2 * geo.WORKSPACE_MARGIN))
+    points = np.array([centre, lo, [hi[0] + 0.3, centre[1]], [lo[0] - 0.03, hi[1] + 0.04]])
+    assert geo.outside_workspace(points) == pytest.approx([0.0, 0.0, 0.3, 0.05])
+    assert geo.outside_workspace(points.reshape(2, 2, 2)).shape == (2, 2)
+
+
 def test_object_mount_offset():
     for k in (0, 55, 99):
         d = geo.object_pose(k).t - geo.tag1_position(k)

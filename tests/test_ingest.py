@@ -429,6 +429,20 @@ def test_missing_frame_without_metadata_names_what_is_there(good_copy, spec):
     )  # fmt: skip
 
 
+@pytest.mark.parametrize("histogram_dir", [False, True], ids=["empty folder", "empty spad_histogram"])
+def test_an_empty_set_folder_is_refused_with_what_a_public_layout_set_holds(tmp_path, spec, histogram_dir):
+    empty = tmp_path / f"{GOOD}{FOLDER_SUFFIX}"
+    empty.mkdir()
+    if histogram_dir:
+        (empty / "spad_histogram").mkdir()
+    named = re.escape(str(empty / "spad_histogram") if histogram_dir else f"{empty}: no spad_histogram/ folder")
+    msg = expect_failure(
+        empty, spec, named, r"a public-layout (capture )?set holds spad_histogram/NNN\.npy \(one \(3 repeats, n, n, 128\) count array per gantry location",
+        r"tracking_rgb/NNN\.png", r"and no metadata\.json$", error=ValueError if histogram_dir else FileNotFoundError,
+    )  # fmt: skip
+    assert str(empty / "metadata.json") not in msg  # the public layout has none: no file of that name is cited
+
+
 def test_metadata_invalid_json(good_copy, spec):
     p = good_copy / "metadata.json"
     p.write_text(p.read_text()[:-20])

@@ -4,11 +4,13 @@ import numpy as np
 import pytest
 from sklearn.metrics import accuracy_score, precision_recall_fscore_support, top_k_accuracy_score
 
+from denali_pipe.core.geometry import gantry_workspace
 from denali_pipe.train.metrics import (
     classification_metrics,
     predict_majority_baseline,
     predict_mean_baseline,
     regression_metrics,
+    workspace_metrics,
 )
 
 
@@ -106,3 +108,13 @@ def test_majority_baseline():
     assert m["top1"] == 0.25 and m["top5"] == 1.0
     # Predicts class 2 only: P = (1/4, 0, 0, 0) over the union {0, 1, 2, 3}.
     assert m["precision"] == pytest.approx(1 / 16)
+
+
+def test_workspace_metrics_count_the_predictions_outside_and_the_furthest():
+    lo, hi = gantry_workspace()
+    inside = np.tile((lo + hi) / 2, (3, 1))
+    assert workspace_metrics(inside) == {"outside_workspace": 0.0, "max_outside_workspace": 0.0}
+    out = np.vstack([inside, [hi[0] + 0.5, hi[1]], [lo[0], lo[1] - 0.25]])
+    assert workspace_metrics(out) == pytest.approx({"outside_workspace": 0.4, "max_outside_workspace": 0.5})
+    with pytest.raises(ValueError, match=r"expected \(N, 2\) predictions"):
+        workspace_metrics(np.zeros(4))

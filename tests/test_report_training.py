@@ -1,5 +1,7 @@
 """Training tables and figures from cells' metrics.json and curves.csv."""
 
+import json
+
 import pandas as pd
 import pytest
 
@@ -20,7 +22,7 @@ from denali_pipe.train.models import PAPER_MODELS
 from denali_pipe.train.runs import load_runs
 
 MODELS = tuple(PAPER_MODELS)
-REG = {"mse": 0.0025, "rmse": 0.05, "mae": 0.04}
+REG = {"mse": 0.0025, "rmse": 0.05, "mae": 0.04, "outside_workspace": 0.1, "max_outside_workspace": 0.02}
 CLS = {"top1": 0.5, "top5": 0.9, "precision": 0.45, "recall": 0.5, "f1": 0.47}
 
 
@@ -59,6 +61,21 @@ def test_table5_has_every_split_na_for_ill_posed_and_the_paper_beside(tmp_path):
     assert (t["protocol"] == "clean").all() and (t["n_seeds"] == 2).all()
     cols = list(t.columns)
     assert cols.index("paper_loc_rmse") == cols.index("loc_rmse") + 2
+    # the share of predictions outside the gantry's workspace, which the paper does not publish
+    assert float(t.loc["size_held_out", "loc_outside_workspace"]) == pytest.approx(0.105)
+    assert float(t.loc["size_held_out", "loc_outside_workspace_std"]) == pytest.approx(0.00707, abs=1e-4)
+    assert "paper_loc_outside_workspace" not in cols
+
+
+def test_tables_read_n_a_for_the_workspace_share_of_cells_that_predate_it(tmp_path):
+    paths = [_write_cell(tmp_path, "cnn1d", "location", "random", 42, condition=c) / "metrics.json" for c in ("all", "light_on", "light_off")]
+    m = json.loads(paths[1].read_text())
+    del m["test"]["outside_workspace"]
+    paths[1].write_text(json.dumps(m))
+    t9 = condition_table(load_runs(paths), "table9", ["lighting"]).set_index("condition")
+    assert t9.loc["all", "loc_outside_workspace"] == pytest.approx(0.1) and t9.loc["light_on", "loc_outside_workspace"] == "n/a"
+    write_table5(paths[1:2], tmp_path / "table5.csv")
+    assert pd.read_csv(tmp_path / "table5.csv", keep_default_na=False).set_index("split").loc["random", "loc_outside_workspace"] == "n/a"
 
 
 def test_table5_shows_one_model_of_one_protocol(tmp_path):
@@ -174,6 +191,7 @@ def test_condition_tables_show_the_groups_trained(tmp_path):
     paths = [_write_cell(tmp_path, "cnn1d", "location", "random", 42, condition=c) / "metrics.json" for c in ("all", "light_on", "light_off")]
     t = condition_table(load_runs(paths), "table9", ["lighting"])
     assert list(t.condition) == ["all", "light_on", "light_off"] and (t.n_seeds == 1).all()
+    assert (t.loc_outside_workspace == 0.1).all() and (t.loc_outside_workspace_std == 0.0).all()
 
 
 def test_jitter_figure(tmp_path):

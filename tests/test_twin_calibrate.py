@@ -131,6 +131,12 @@ def test_file_round_trips_into_calibrated_twins(cal, catalogue, fitted, tmp_path
     assert np.allclose(tw.relays[2].size, zone_footprints(cal, 3, ZoneGeometry(f.offsets, f.scales))[2].size)
     with pytest.raises(ValueError, match="not a twin calibration"):
         C.read_calibration(tmp_path / "missing.json")
+    # how the fit ended, as the stability report reads it: one named value per fit coordinate
+    status = C.read_fit_status(path)
+    assert status.n_coordinates == len(result.x) and status.at_bound == tuple(C.at_bound(result.x, SETTINGS))
+    assert (status.converged, status.evaluations) == (result.fit["converged"], result.fit["evaluations"])
+    with pytest.raises(ValueError, match="not a twin calibration"):
+        C.read_fit_status(tmp_path / "missing.json")
 
 
 def _mesh(catalogue):

@@ -118,6 +118,8 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     # every training cell reads its dataset; tiny: 1 seed, 13 Table 5 cells + 9 more Table 2 cells + 3 linear + Fig 14's 8x8 shape cell,
     # 10 conditioned cells of Tables 7-9 (their baselines are Table 5's) and 3 of the jitter sweep
     training = {"train": 39, "table5": 1, "table2": 1, "table10": 1, "training_curves": 2, "speed_vs_accuracy": 1, "condition_table": 3, "jitter": 1}
+    # ... and the stability report reads them all, with the transforms and the twin's calibration
+    training["stability"] = 1
     # the retrained cells are scored on the variant datasets again (5 evaluations)
     experiments = {"evaluate": 5, "fig10": 1, "fig11": 1, "tsne": 2}
     expected = {**own, **aggregates, **training, **experiments}
@@ -264,12 +266,43 @@ def test_jitter_sweep(tiny_run):
     assert cell["input_shape"] == [1, 1, 128 - crop] and cell["n_train"] + cell["n_validation"] + cell["n_test"] == 3 * 2 * 12 * 3
 
 
+def test_stability_report_reads_every_cell_the_fit_and_the_twin(tiny_run):
+    """results/stability.csv: every failure mode over all the run's cells
+    (every metrics.json under results/runs/), the transforms and the twin's
+    calibration, counted as their own files say; Tables 5 and 9 show the
+    share of predictions outside the workspace that the cells recorded."""
+    from denali_pipe.report.stability import cell_id
+    from denali_pipe.train.cell_metrics import CellMetrics
+
+    cells = [CellMetrics.read(p) for p in sorted((tiny_run / "results/runs").rglob("metrics.json"))]
+    assert len(cells) == 39
+    table = pd.read_csv(tiny_run / "results/stability.csv", keep_default_na=False).set_index("failure")
+    assert len(table) == 8 and (tiny_run / "results/stability.png").stat().st_size > 10_000
+    located = [m for m in cells if m.cell.task == "location"]
+    assert table.loc["diverged training", "count"] == 0 and table.loc["diverged training", "of"] == len(cells)
+    assert table.loc["location outside the workspace", "of"] == table.loc["location worse than the mean", "of"] == len(located)
+    outside = sorted(cell_id(m.cell) for m in located if m.test["outside_workspace"] > 0)
+    assert sorted(w.split(" (")[0] for w in table.loc["location outside the workspace", "which"].split("; ") if w) == outside
+    stopped = sorted(cell_id(m.cell) for m in cells if m.stopped_by_budget)
+    assert sorted(w.split(" (")[0] for w in table.loc["training stopped by its budget", "which"].split("; ") if w) == stopped
+    c = json.loads((tiny_run / "results/twin_calibration.json").read_text())
+    assert table.loc["twin coordinate at its bound", "count"] == len(c["at_bound"])
+    assert table.loc["twin coordinate at its bound", "of"] == sum(np.size(v) for v in c["parameters"].values())
+    assert table.loc["twin calibration stopped by its budget", "count"] == (0 if c["fit"]["converged"] else 1)
+    t = json.loads((tiny_run / "results/transforms.json").read_text())
+    assert table.loc["sim-to-real transforms unidentified", "of"] == (1 if t["mode"] == "shared" else 9)
+    t5 = pd.read_csv(tiny_run / "results/table5.csv").set_index("split")
+    random_cell = json.loads((tiny_run / "results/runs/clean/3x3/all/random/cnn1d_location/seed42/metrics.json").read_text())
+    assert t5.loc["random", "loc_outside_workspace"] == pytest.approx(random_cell["test"]["outside_workspace"], abs=1e-4)
+    assert pd.read_csv(tiny_run / "results/table9.csv")["loc_outside_workspace"].between(0, 1).all()
+
+
 def test_changing_one_models_hyperparameters_reruns_only_its_cells_and_tables(tiny_run, tmp_path):
     cfg = tmp_path / "lr.yaml"
     cfg.write_text("train:\n  models:\n    mlp:\n      location: {lr: 0.002}\n")
     out = snakemake(tiny_run, "-n", "--configfile", "config/presets/tiny.yaml", str(cfg)).stdout
     jobs = job_counts(out)
-    assert jobs == {"train": 1, "table2": 1, "table10": 1, "speed_vs_accuracy": 1, "all": 1, "total": 5}
+    assert jobs == {"train": 1, "table2": 1, "table10": 1, "speed_vs_accuracy": 1, "stability": 1, "all": 1, "total": 6}
     assert "mlp_location" in out
 
 
@@ -480,7 +513,7 @@ def test_tsne_figures_at_both_resolutions(tiny_run):
 REPORTED = (
     "rig_examples.png", "rig_vs_real.png", "table4.csv", "table6.csv", "fig12.png", "detections.csv", "table5.csv", "table2.csv", "table10.csv",
     "fig16.png", "fig17.png", "speed_vs_accuracy.png", "render_benchmark.png", "twin_calibration.png", "fig18.png", "transforms.json", "fig9.png",
-    "fig10.png", "fig11.png", "fig13.png", "fig14.png", "table7.csv", "table8.csv", "table9.csv", "jitter.png",
+    "fig10.png", "fig11.png", "fig13.png", "fig14.png", "table7.csv", "table8.csv", "table9.csv", "jitter.png", "stability.png",
 )  # fmt: skip
 
 
@@ -496,7 +529,14 @@ def test_report_has_every_table_and_figure_with_its_caption(tiny_run):
     assert html.count('protocol <tt class=\\"docutils literal\\">clean</tt>') + html.count('Protocol <tt class=\\"docutils literal\\">clean</tt>') >= 10
     titles = ("Table 5: the 1D CNN under five train/test splits", "Figure 16: 1D CNN localisation", "Figure 17: 1D CNN shape", "Figure 9: localisation RMSE")
     experiments = ("Figure 10: non-retroreflective objects", "Figure 11: the italic", "Figure 13: 3x3", "Figure 14: 8x8")
-    for title in (*titles, *experiments, "Table 7: shape classification", "Table 8: size classification", "Table 9: localisation RMSE", "Timing-jitter sweep"):
+    tables = (
+        "Table 7: shape classification",
+        "Table 8: size classification",
+        "Table 9: localisation RMSE",
+        "Timing-jitter sweep",
+        "Where the run's methods fail",
+    )
+    for title in (*titles, *experiments, *tables):
         assert title in html
 
 

@@ -59,22 +59,32 @@ def reduced_configfiles(workdir: Path, **settings) -> tuple[str, ...]:
     return ("--configfile", "config/presets/tiny.yaml", "reduced.yaml")
 
 
-def snakemake(workdir: Path, *args: str, check: bool = True) -> subprocess.CompletedProcess:
-    """Run the venv's snakemake in `workdir` by its path, the venv left OFF
-    PATH (as for a user who never activated it): the rules must reach the
-    project through the interpreter that runs the workflow."""
+def snakemake_command(*args: str, env: dict[str, str] | None = None) -> tuple[list[str], dict[str, str]]:
+    """The venv's snakemake by its path with `args`, and the environment
+    (`env` or this one) with the venv left OFF PATH (as for a user who never
+    activated it): the rules must reach the project through the interpreter
+    that runs the workflow."""
     venv_bin = str(Path(sys.executable).parent)
-    env = {**os.environ, "PATH": os.pathsep.join(p for p in os.environ["PATH"].split(os.pathsep) if p != venv_bin)}
-    proc = subprocess.run(
-        [str(Path(sys.executable).parent / "snakemake"), *args],
-        cwd=workdir,
-        env=env,
-        capture_output=True,
-        text=True,
-    )
+    env = dict(os.environ if env is None else env)
+    env["PATH"] = os.pathsep.join(p for p in env["PATH"].split(os.pathsep) if p != venv_bin)
+    return [str(Path(sys.executable).parent / "snakemake"), *args], env
+
+
+def snakemake(workdir: Path, *args: str, check: bool = True, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """Run snakemake (`snakemake_command`) in `workdir` to its end."""
+    command, env = snakemake_command(*args, env=env)
+    proc = subprocess.run(command, cwd=workdir, env=env, capture_output=True, text=True)
     if check and proc.returncode != 0:
         raise AssertionError(f"snakemake {' '.join(args)} failed ({proc.returncode}):\n{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}")
     return proc
+
+
+def start_snakemake(workdir: Path, *args: str) -> subprocess.Popen:
+    """Start snakemake (`snakemake_command`) in `workdir` and return at once;
+    its output goes to `workdir`/snakemake.out."""
+    command, env = snakemake_command(*args)
+    with open(workdir / "snakemake.out", "w") as out:
+        return subprocess.Popen(command, cwd=workdir, env=env, stdout=out, stderr=subprocess.STDOUT, text=True)
 
 
 def job_counts(out: str) -> dict[str, int]:

@@ -92,16 +92,18 @@ OWNER_POLL_S = 1.0
 _LENGTH = 8  # bytes of the request's length prefix
 
 _server: subprocess.Popen | None = None
+_socket_dir: Path | None = None  # the folder `start` made for the socket: the only one `stop` removes
 
 
 def start(enabled: bool, log: Path) -> None:
     """Start the server for this (local, Linux) Snakemake run and point the
     jobs at it through `ENV`; its own messages go to `log`. Nothing when not
     `enabled`, off Linux, or when a server is already running."""
-    global _server
+    global _server, _socket_dir
     if not enabled or not sys.platform.startswith("linux") or _server is not None:
         return
-    socket_path = Path(tempfile.mkdtemp(prefix="denali-warm-")) / "socket"
+    _socket_dir = Path(tempfile.mkdtemp(prefix="denali-warm-"))
+    socket_path = _socket_dir / "socket"
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "w") as out:
         _server = subprocess.Popen(
@@ -115,9 +117,13 @@ def start(enabled: bool, log: Path) -> None:
 
 
 def stop() -> None:
-    """Stop the server `start` started, if any, and remove its socket."""
-    global _server
-    socket_path = os.environ.pop(ENV, None)
+    """Stop the server `start` started, if any, and remove its socket. A
+    socket named in the environment that `start` did not make (inherited
+    from the shell, a crashed run's) is left alone, as is the variable."""
+    global _server, _socket_dir
+    if _socket_dir is None:
+        return
+    os.environ.pop(ENV, None)
     if _server is not None:
         _server.terminate()
         try:
@@ -126,8 +132,8 @@ def stop() -> None:
             _server.kill()
             _server.wait()
         _server = None
-    if socket_path:
-        shutil.rmtree(Path(socket_path).parent, ignore_errors=True)
+    shutil.rmtree(_socket_dir, ignore_errors=True)
+    _socket_dir = None
 
 
 def hand_off(argv: list[str]) -> int | None:

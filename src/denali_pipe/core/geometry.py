@@ -438,6 +438,31 @@ def select_locations(n: int) -> np.ndarray:
     return np.unique(np.round(np.linspace(0, N_LOCATIONS - 1, n)).astype(int))
 
 
+# The gantry's workspace, where a location prediction can be right: the x-y box
+# of its 100 tag-1 positions widened by this margin (m) on every side. Half a
+# step (1.8 cm): a point within it is nearer the outermost row or column than
+# the next step out, and it holds every label of the release (its
+# tag1_positions.json lie up to 1.2 cm beyond the design grid's box, the
+# reference tracking's single-tag bias; tests/test_geometry.py) and our
+# tracked labels' ~1 mm scatter (gantry repeatability, plane intersection).
+WORKSPACE_MARGIN = 0.5 * float(np.linalg.norm(GANTRY_COL_STEP))
+
+
+def gantry_workspace(margin: float = WORKSPACE_MARGIN) -> tuple[np.ndarray, np.ndarray]:
+    """The gantry's workspace in the world's x-y plane: its (2,) lower and
+    upper corners (m), the box of every location's tag-1 position widened by
+    `margin` (m)."""
+    xy = tag1_position(np.arange(N_LOCATIONS))[:, :2]
+    return xy.min(axis=0) - margin, xy.max(axis=0) + margin
+
+
+def outside_workspace(xy: np.ndarray, margin: float = WORKSPACE_MARGIN) -> np.ndarray:
+    """Distance (m) of x-y points (..., 2) outside `gantry_workspace(margin)`; 0 inside."""
+    lo, hi = gantry_workspace(margin)
+    beyond = np.maximum(lo - np.asarray(xy, dtype=np.float64), 0.0) + np.maximum(np.asarray(xy, dtype=np.float64) - hi, 0.0)
+    return np.linalg.norm(beyond, axis=-1)
+
+
 def wall_distance(points: np.ndarray) -> np.ndarray:
     """Distance (m) of world points (..., 3) in front of the relay wall plane."""
     return (WALL.centre - np.asarray(points)) @ (-WALL.normal)

@@ -49,7 +49,7 @@ from denali_pipe.core import geometry as geo
 from denali_pipe.core.capture_sets import LIGHTINGS, PICKLE_SUFFIX, CaptureSet, parse_set_name
 from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.io.pickle_stream import CAMERA_RECORDS, iter_records
-from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE, histogram_files, location_span
+from denali_pipe.io.release import FRAME_DIRS, HISTOGRAM_DIR, METADATA_FILE, PUBLIC_LAYOUT, histogram_files, location_span
 from denali_pipe.io.store import StoreWriter, frame_spec
 from denali_pipe.io.tree import misnamed_reason
 
@@ -108,7 +108,10 @@ def ingest_release(set_dir: Path, out: Path, spec: ObjectSpec | None) -> pd.Data
         md_sources = [(md_path.relative_to(root).as_posix(), "metadata", len(md_bytes), _sha256(md_bytes))]
     else:
         # The public release ships no metadata.json: its histogram files name the locations.
-        metadata = {"locations": sorted(histogram_files(set_dir))}
+        files = histogram_files(set_dir)
+        if not files:
+            raise ValueError(f"{set_dir / HISTOGRAM_DIR}: capture set {cs.name}: no NNN.npy histogram file: a public-layout set holds {PUBLIC_LAYOUT}")
+        metadata = {"locations": sorted(files)}
         md_sources = []
     meta = _Metadata.check(metadata, cs, md_path, require_locations=True)
     basis = f"{METADATA_FILE} lists" if md_sources else f"{HISTOGRAM_DIR}/ (which names the locations: no {METADATA_FILE}) holds"

@@ -10,6 +10,11 @@ FRAME_DIRS = ("tracking_rgb", "tracking_depth", "colocated_rgb", "colocated_dept
 # The published release's frames: tracking colour only (and no metadata.json).
 PUBLIC_FRAME_DIRS = ("tracking_rgb",)
 METADATA_FILE = "metadata.json"
+# What a set folder of the public release holds, for the messages about a set with nothing to read.
+PUBLIC_LAYOUT = (
+    f"{HISTOGRAM_DIR}/NNN.npy (one (3 repeats, n, n, 128) count array per gantry location, NNN from 000 to 099) "
+    f"and {PUBLIC_FRAME_DIRS[0]}/NNN.png (one tracking frame per location), and no {METADATA_FILE}"
+)
 
 _NNN = re.compile(r"^(\d{3})\.npy$")
 
@@ -18,7 +23,7 @@ def histogram_files(set_dir: Path) -> dict[int, Path]:
     """{gantry location: spad_histogram/NNN.npy} of a set folder, sorted by location."""
     folder = Path(set_dir) / HISTOGRAM_DIR
     if not folder.is_dir():
-        raise FileNotFoundError(f"{set_dir}: no {HISTOGRAM_DIR}/ folder")
+        raise FileNotFoundError(f"{set_dir}: no {HISTOGRAM_DIR}/ folder: a public-layout capture set holds {PUBLIC_LAYOUT}")
     files = {}
     for p in sorted(folder.iterdir()):
         m = _NNN.match(p.name)

@@ -13,7 +13,7 @@ from denali_pipe.core.atomic import atomic_file
 from denali_pipe.core.geometry import RESOLUTIONS
 from denali_pipe.report.paper import CONDITION_TABLES, CONDITION_TABLES_RESOLUTION
 from denali_pipe.train.conditions import GROUP_OF, table_conditions
-from denali_pipe.train.runs import METRICS, NA, load_runs, protocol_of, seed_stats
+from denali_pipe.train.runs import EXTRA_METRICS, METRICS, NA, load_runs, protocol_of, seed_stats
 
 
 def condition_table(runs: pd.DataFrame, table: str, groups: list[str]) -> pd.DataFrame:
@@ -21,8 +21,10 @@ def condition_table(runs: pd.DataFrame, table: str, groups: list[str]) -> pd.Dat
     in its baseline and `groups` (conditions.table_conditions):
     each of the task's metrics with _std over seeds, the paper's value
     (`paper_`) and the trivial predictor's (`trivial_`: training mean
-    position or majority class), then the mean training and test sizes and
-    n_seeds. A condition without cells (ill-posed there) reads n/a."""
+    position or majority class); for location, the share of test
+    predictions outside the gantry's workspace (`runs.EXTRA_METRICS`); then
+    the mean training and test sizes and n_seeds. A condition without cells
+    (ill-posed there) reads n/a."""
     task, conditions = table_conditions(table, groups)
     got = sorted({(m, t) for m, t in zip(runs["model"], runs["task"])})
     if len(got) != 1 or got[0][1] != task:
@@ -31,7 +33,8 @@ def condition_table(runs: pd.DataFrame, table: str, groups: list[str]) -> pd.Dat
     if unknown:
         raise ValueError(f"{table} has no row for conditions {unknown}; its rows are {list(conditions)}")
     names = [name for name, (t, _) in METRICS.items() if t == task]
-    columns = [f"{kind}_{METRICS[n][1]}" for n in names for kind in ("test", "baseline")] + ["n_train", "n_test"]
+    extra = {name: metric for name, (t, metric) in EXTRA_METRICS.items() if t == task and f"test_{metric}" in runs}
+    columns = [f"{kind}_{METRICS[n][1]}" for n in names for kind in ("test", "baseline")] + [f"test_{m}" for m in extra.values()] + ["n_train", "n_test"]
     stats = seed_stats(runs, ["resolution", "condition"], columns).set_index(["resolution", "condition"])
     paper = CONDITION_TABLES[table]
     protocol = protocol_of(runs)
@@ -47,6 +50,10 @@ def condition_table(runs: pd.DataFrame, table: str, groups: list[str]) -> pd.Dat
                 row[f"{name}_std"] = round(float(s[f"test_{metric}_std"]), 4) if trained else NA
                 row[f"paper_{name}"] = paper[condition][name] if res == CONDITION_TABLES_RESOLUTION else ""
                 row[f"trivial_{name}"] = round(float(s[f"baseline_{metric}"]), 4) if trained else NA
+            for name, metric in extra.items():
+                known = trained and not pd.isna(s[f"test_{metric}"])
+                row[name] = round(float(s[f"test_{metric}"]), 4) if known else NA
+                row[f"{name}_std"] = round(float(s[f"test_{metric}_std"]), 4) if known else NA
             row["n_train"] = int(round(s["n_train"])) if trained else 0
             row["n_test"] = int(round(s["n_test"])) if trained else 0
             row["n_seeds"] = int(s["n_seeds"]) if trained else 0

@@ -6,6 +6,9 @@ Regression (location): d = prediction - target, (N, 2) in metres (x, y).
 - mae = mean|d| over the same entries; per-axis mse_x, mse_y, mae_x, mae_y;
 - rmse_euclidean = sqrt(mean(dx^2 + dy^2)) = sqrt(2) * rmse, the RMS distance
   between predicted and true points, for readers who expect that one.
+Beside them, what no error shows (`workspace_metrics`): how many predictions
+lie outside the gantry's workspace (`geometry.gantry_workspace`, margin
+`geometry.WORKSPACE_MARGIN`), where no object can be, and how far out.
 
 Classification (shape, size), from logits (N, C) and integer labels (N,):
 - top1 = accuracy of argmax; top5 = the label is among the min(5, C) largest
@@ -22,6 +25,8 @@ Baselines give predictions in the same shapes, to be scored with the same metric
 from __future__ import annotations
 
 import numpy as np
+
+from denali_pipe.core.geometry import outside_workspace
 
 TOP_K = 5
 
@@ -43,6 +48,17 @@ def regression_metrics(pred: np.ndarray, target: np.ndarray) -> dict[str, float]
         "mae_y": float(ab[:, 1].mean()),
         "rmse_euclidean": float(np.sqrt(sq.sum(axis=1).mean())),
     }
+
+
+def workspace_metrics(pred: np.ndarray) -> dict[str, float]:
+    """Of (N, 2) predicted positions (m): outside_workspace, the share lying
+    outside the gantry's workspace; max_outside_workspace, the furthest
+    one's distance beyond it (m, 0 when none is outside)."""
+    pred = np.asarray(pred, dtype=np.float64)
+    if pred.ndim != 2 or pred.shape[1] != 2:
+        raise ValueError(f"expected (N, 2) predictions, got {pred.shape}")
+    beyond = outside_workspace(pred)
+    return {"outside_workspace": float((beyond > 0).mean()), "max_outside_workspace": float(beyond.max(initial=0.0))}
 
 
 def top_k_accuracy(logits: np.ndarray, target: np.ndarray, k: int) -> float:

@@ -20,6 +20,9 @@ METRICS = {
     "size_recall": ("size", "recall"),
     "size_accuracy": ("size", "top1"),
 }
+# Beside the paper's metrics, which has none of them: the share of a location
+# cell's test predictions outside the gantry's workspace (metrics.workspace_metrics).
+EXTRA_METRICS = {"loc_outside_workspace": ("location", "outside_workspace")}
 # The one metric per task that charts use, and whether higher is better.
 HEADLINE = {"location": ("rmse", False), "shape": ("top1", True), "size": ("top1", True)}
 NA = "n/a"
@@ -71,19 +74,28 @@ def seed_stats(runs: pd.DataFrame, by: list[str], columns: list[str]) -> pd.Data
 
 def metric_table(runs: pd.DataFrame, key: str, keys: list[str], paper: dict) -> pd.DataFrame:
     """Rows = values of `key` (e.g. split or model) in order `keys`, columns =
-    the paper's metrics, each with _std and the paper's value beside it;
-    cells never trained (ill-posed, or not run) read n/a."""
+    the paper's metrics, each with _std and the paper's value beside it, then
+    `EXTRA_METRICS` with _std; cells never trained (ill-posed, or not run) read n/a."""
     table = pd.DataFrame({key: keys})
-    for name, (task, metric) in METRICS.items():
+    for name, (task, metric) in {**METRICS, **EXTRA_METRICS}.items():
         sub = runs[runs["task"] == task]
         col = f"test_{metric}"
-        stats = seed_stats(sub, [key], [col]).set_index(key) if len(sub) else pd.DataFrame()
-        table[name] = [round(float(stats.loc[k, col]), 4) if k in stats.index else NA for k in keys]
-        table[f"{name}_std"] = [round(float(stats.loc[k, f"{col}_std"]), 4) if k in stats.index else NA for k in keys]
-        table[f"paper_{name}"] = [_paper_value(paper, k, name) for k in keys]
+        stats = seed_stats(sub, [key], [col]).set_index(key) if len(sub) and col in sub else pd.DataFrame()
+        table[name] = [_rounded(stats, k, col) for k in keys]
+        table[f"{name}_std"] = [_rounded(stats, k, f"{col}_std") for k in keys]
+        if name in METRICS:
+            table[f"paper_{name}"] = [_paper_value(paper, k, name) for k in keys]
     seeds = runs.groupby(key)["seed"].nunique()
     table["n_seeds"] = [int(seeds.get(k, 0)) for k in keys]
     return table
+
+
+def _rounded(stats: pd.DataFrame, key, column: str):
+    """stats[column] at row `key` to 4 decimals; n/a for a row never trained,
+    or whose cells predate the metric."""
+    if key not in stats.index or pd.isna(stats.loc[key, column]):
+        return NA
+    return round(float(stats.loc[key, column]), 4)
 
 
 def _paper_value(paper: dict, key: str, name: str):

@@ -157,7 +157,11 @@ def infer(model: nn.Module, x: torch.Tensor, device: torch.device | str = "cpu",
 
 
 def task_metrics(task: str, out: np.ndarray, y: np.ndarray) -> dict:
-    return M.regression_metrics(out, y) if task == "location" else M.classification_metrics(out, y)
+    """A cell's metrics of outputs `out` against labels `y`: location's errors
+    and how many predictions leave the gantry's workspace; the classifiers'."""
+    if task == "location":
+        return {**M.regression_metrics(out, y), **M.workspace_metrics(out)}
+    return M.classification_metrics(out, y)
 
 
 def selection_key(task: str) -> tuple[str, int]:
@@ -217,6 +221,9 @@ def fit(
     evaluated) once this much training time is spent, so that models too
     slow for the machine still give a measured point; None trains every epoch.
 
+    A NaN or infinite loss in an epoch raises ValueError naming `name` and the
+    epoch: the cell fails and nothing is selected or scored.
+
     precision: the dtype of the forward and backward passes
     (`training_precision`); the loss is taken in float32.
 
@@ -246,6 +253,11 @@ def fit(
             over_budget = budget_seconds is not None and train_seconds + time.perf_counter() - t0 > budget_seconds
             if over_budget:
                 break
+        # A NaN or inf loss has already poisoned the weights: no later epoch, and no metric, can be trusted.
+        if not torch.isfinite(total):
+            raise ValueError(
+                f"{name}: the loss diverged ({total.item()}) in epoch {epoch}; lower the learning rate (lr {hp.lr:g}) or check the inputs for non-finite values"
+            )
         train_seconds += time.perf_counter() - t0
         score = None
         if evaluate_epoch is not None:
@@ -316,7 +328,7 @@ def run_cell(
         rows.extend(metric_rows(epoch, select_on[0], sel))
         return sign * sel[metric]
 
-    name = f"{cell.model} {cell.task} {cell.split} {cell.resolution} seed {cell.seed}"
+    name = f"{cell.model} {cell.task} {cell.split} {cell.resolution} {cell.condition} {cell.protocol} seed {cell.seed}"
     fitted = fit(model, xn[split.train].to(dev), yt[split.train].to(dev), hp, cell.seed, loss_for(cell.task), evaluate_epoch, budget_seconds, name, precision)
 
     t0 = time.perf_counter()

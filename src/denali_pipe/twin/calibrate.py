@@ -625,3 +625,28 @@ def read_calibration(path: Path) -> Fitted:
         )
     except (OSError, KeyError, TypeError, ValueError) as e:
         raise ValueError(f"{path}: not a twin calibration ({type(e).__name__}: {e})") from None
+
+
+@dataclass(frozen=True)
+class FitStatus:
+    """How twin_calibration.json's fit ended: the coordinates pinned at a
+    bound (`at_bound`'s names), how many coordinates it fitted, and whether
+    it converged within `twin.calibration.max_evaluations` (evaluations used)."""
+
+    at_bound: tuple[str, ...]
+    n_coordinates: int
+    converged: bool
+    evaluations: int
+
+
+def read_fit_status(path: Path) -> FitStatus:
+    """twin_calibration.json's `FitStatus`; ValueError naming the file when it is not a calibration."""
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text())
+        if d.get("denali_twin_calibration") != CALIBRATION_VERSION:
+            raise ValueError(f"version {d.get('denali_twin_calibration')!r}, expected {CALIBRATION_VERSION}")
+        n = sum(int(np.size(v)) for v in d["parameters"].values())
+        return FitStatus(tuple(str(a) for a in d["at_bound"]), n, bool(d["fit"]["converged"]), int(d["fit"]["evaluations"]))
+    except (OSError, KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"{path}: not a twin calibration ({type(e).__name__}: {e})") from None

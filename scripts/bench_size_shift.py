@@ -1,0 +1,97 @@
+#!/usr/bin/env python
+"""What makes `size_held_out` localisation extrapolate; prints a table, asserts nothing.
+
+    python scripts/bench_size_shift.py results/datasets/3x3 --epochs 30 --seeds 42 43
+
+The 1D CNN localiser trained on one object size and tested on the other, both
+ways (4 in -> 8 in, 8 in -> 4 in), under each combination of
+- the input: `raw` counts (the config's), `log_z` (signed log, z-scored on the
+  training part) or `per_sample` (each sample over its own summed |counts|,
+  scaled by the number of values: blind to the return's amplitude, which
+  scales with the object's area);
+- the targets: `metres` (the reference's) or `standardised` (z-scored on
+  the training part, the predictions mapped back).
+The validation part is 20 % of the training size's (set, location) capture
+groups, as the clean protocol draws it for this split (`splits.validation_split`):
+it shares the training size, so it cannot show the size shift itself. Each row:
+validation and test RMSE (m), the training-mean predictor's test RMSE, the share
+of test predictions outside the gantry's workspace and the furthest one (m).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+
+from denali_pipe.preprocess.histograms import normalise
+from denali_pipe.train.dataset import read_dataset
+from denali_pipe.train.metrics import regression_metrics, workspace_metrics
+from denali_pipe.train.models import cnn1d
+from denali_pipe.train.training import Hyper, fit, infer, loss_for
+
+INPUTS = ("raw", "log_z", "per_sample")
+TARGETS = ("metres", "standardised")
+
+
+def model_input(kind: str, x: np.ndarray, train: np.ndarray) -> np.ndarray:
+    if kind in ("raw", "log_z"):
+        _, stats = normalise(x[train], kind)
+        return normalise(x, kind, stats)[0]
+    total = np.abs(x).reshape(len(x), -1).sum(axis=1).reshape(-1, 1, 1, 1)
+    return (x * (x[0].size / np.maximum(total, 1e-6))).astype(np.float32)
+
+
+def size_split(samples: pd.DataFrame, train_size: str, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(train, validation, test) rows: train and validation of `train_size`, by capture group; test the other size."""
+    own = np.flatnonzero(samples["size"] == train_size)
+    groups = samples.iloc[own].groupby(["set", "location"]).ngroup().to_numpy()
+    held = np.random.default_rng(seed).choice(np.unique(groups), int(0.2 * groups.max() + 0.2), replace=False)
+    return own[~np.isin(groups, held)], own[np.isin(groups, held)], np.flatnonzero(samples["size"] != train_size)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("dataset", type=Path, help="results/datasets/<res> (the .zarr and .parquet beside each other)")
+    p.add_argument("--epochs", type=int, default=30)
+    p.add_argument("--seeds", type=int, nargs="+", default=[42])
+    args = p.parse_args()
+    x, samples, _ = read_dataset(args.dataset.with_suffix(".zarr"), args.dataset.with_suffix(".parquet"))
+    y = samples[["x", "y"]].to_numpy(np.float32)
+    totals = samples.assign(total=x.reshape(len(x), -1).sum(axis=1)).groupby("size")["total"].mean()
+    print(f"mean summed counts of a sample: {totals.round(0).to_dict()}")
+    rows = []
+    for seed in args.seeds:
+        for train_size in ("4inch", "8inch"):
+            tr, va, te = size_split(samples, train_size, seed)
+            for kind in INPUTS:
+                xn = torch.from_numpy(np.ascontiguousarray(model_input(kind, x, tr)))
+                for targets in TARGETS:
+                    mu, sd = (y[tr].mean(0), y[tr].std(0)) if targets == "standardised" else (np.zeros(2, np.float32), np.ones(2, np.float32))
+                    torch.manual_seed(seed)
+                    model = cnn1d("location", 2, x.shape[1:])
+
+                    def score(epoch, rows_seen, out, model=model, xn=xn, mu=mu, sd=sd, va=va):
+                        return -regression_metrics(infer(model, xn[va]) * sd + mu, y[va])["rmse"]
+
+                    yt = torch.from_numpy((y - mu) / sd)
+                    fit(model, xn[tr], yt[tr], Hyper(1e-3, args.epochs, 64, kind), seed, loss_for("location"), score, name="size shift")
+                    pv, pt = infer(model, xn[va]) * sd + mu, infer(model, xn[te]) * sd + mu
+                    rows.append(
+                        {
+                            "seed": seed, "train": train_size, "input": kind, "targets": targets,
+                            "val_rmse": regression_metrics(pv, y[va])["rmse"], "test_rmse": regression_metrics(pt, y[te])["rmse"],
+                            "mean_rmse": regression_metrics(np.tile(y[tr].mean(0), (len(te), 1)), y[te])["rmse"],
+                            **workspace_metrics(pt),
+                        }
+                    )  # fmt: skip
+    table = pd.DataFrame(rows)
+    print(table.round(3).to_string(index=False))
+    print(table.groupby(["train", "input", "targets"])[["val_rmse", "test_rmse", "outside_workspace", "max_outside_workspace"]].mean().round(3).to_string())
+
+
+if __name__ == "__main__":
+    main()
