@@ -19,6 +19,7 @@ import pandas as pd
 import zarr
 
 from denali_pipe.core.atomic import atomic_dir, atomic_file
+from denali_pipe.core.capture_sets import CaptureSet
 from denali_pipe.core.objects import VARIANTS, ObjectSpec
 from denali_pipe.io.features import read_features
 
@@ -32,6 +33,26 @@ def location_labels(positions: pd.DataFrame) -> dict[int, tuple[float, float]]:
     if missing:
         raise ValueError(f"tag1 positions table lacks the columns {sorted(missing)}")
     return {int(r.location): (float(r.x), float(r.y)) for r in positions.itertuples()}
+
+
+def sample_rows(
+    cs: CaptureSet, spec: ObjectSpec, locations: np.ndarray, repeats: int, labels: dict[int, tuple[float, float]], where: Path | str
+) -> pd.DataFrame:
+    """The sample table (SAMPLE_COLUMNS) of one set's (L,) `locations` x
+    `repeats`, location-major: each repeat its own row, labelled with its
+    location's tag-1 position (x, y, metres). ValueError naming `where` when
+    a location has no label."""
+    unlabelled = sorted(int(k) for k in locations if int(k) not in labels)
+    if unlabelled:
+        raise ValueError(f"{where}: no location label (tag 1 position) for locations {unlabelled}")
+    loc = np.repeat(np.asarray(locations), repeats)
+    xy = np.array([labels[int(k)] for k in loc])
+    return pd.DataFrame(
+        {
+            "set": cs.name, "object": cs.object, "class": spec.cls, "type": spec.type, "size": cs.size, "light": cs.light,
+            "location": loc.astype(np.int64), "repeat": np.tile(np.arange(repeats), len(locations)), "x": xy[:, 0], "y": xy[:, 1],
+        }
+    )[list(SAMPLE_COLUMNS)]  # fmt: skip
 
 
 def build_dataset(
@@ -56,21 +77,9 @@ def build_dataset(
             shape, crop = f.values.shape[2:], f.crop_start
         elif f.values.shape[2:] != shape or f.crop_start != crop:
             raise ValueError(f"{path}: features {f.values.shape[2:]} from bin {f.crop_start} differ from the other sets' {shape} from bin {crop}")
-        unlabelled = sorted(int(k) for k in f.locations if int(k) not in labels)
-        if unlabelled:
-            raise ValueError(f"{path}: no location label (tag 1 position) for locations {unlabelled}")
         L, R = f.values.shape[:2]
+        rows.append(sample_rows(cs, spec, f.locations, R, labels, path))
         blocks.append(f.values.reshape(L * R, *shape))
-        loc = np.repeat(f.locations, R)
-        xy = np.array([labels[int(k)] for k in loc])
-        rows.append(
-            pd.DataFrame(
-                {
-                    "set": cs.name, "object": cs.object, "class": spec.cls, "type": spec.type, "size": cs.size, "light": cs.light,
-                    "location": loc.astype(np.int64), "repeat": np.tile(np.arange(R), L), "x": xy[:, 0], "y": xy[:, 1],
-                }
-            )
-        )  # fmt: skip
     if not blocks:
         raise ValueError("build_dataset: no feature stores given")
     return np.concatenate(blocks), pd.concat(rows, ignore_index=True)[list(SAMPLE_COLUMNS)]

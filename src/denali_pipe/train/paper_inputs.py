@@ -30,7 +30,7 @@ import pandas as pd
 
 from denali_pipe.core.objects import VARIANTS, ObjectSpec
 from denali_pipe.io.store import open_set
-from denali_pipe.train.dataset import SAMPLE_COLUMNS
+from denali_pipe.train.dataset import SAMPLE_COLUMNS, sample_rows
 
 NORMS = ("raw", "log_z")
 # added to the std before dividing, in float32 (the reference's `X.std() + 1e-6`)
@@ -62,23 +62,11 @@ def paper_samples(
             shape = h.shape[2:]
         elif h.shape[2:] != shape:
             raise ValueError(f"{store.path}: histograms {h.shape[2:]} differ from the other sets' {shape}")
-        unlabelled = sorted(int(k) for k in store.locations if int(k) not in labels)
-        if unlabelled:
-            raise ValueError(f"{store.path}: no location label (tag 1 position) for locations {unlabelled}")
         order = np.argsort(store.locations, kind="stable")  # store order is capture order; the reference's is the frame's
-        loc, h = store.locations[order], h[order]
+        h = h[order]
         L, R = h.shape[:2]
+        rows.append(sample_rows(cs, spec, store.locations[order], R, labels, store.path))
         blocks.append(h.reshape(L * R, *shape).astype(np.float32))
-        loc = np.repeat(loc, R)
-        xy = np.array([labels[int(k)] for k in loc])
-        rows.append(
-            pd.DataFrame(
-                {
-                    "set": cs.name, "object": cs.object, "class": spec.cls, "type": spec.type, "size": cs.size, "light": cs.light,
-                    "location": loc.astype(np.int64), "repeat": np.tile(np.arange(R), L), "x": xy[:, 0], "y": xy[:, 1],
-                }
-            )
-        )  # fmt: skip
     return np.concatenate(blocks), pd.concat(rows, ignore_index=True)[list(SAMPLE_COLUMNS)]
 
 
