@@ -202,21 +202,29 @@ def server_killed(tmp_path_factory):
     (workdir, the run's exit status, its socket, whether the socket was left
     behind by the kill, whether it was still there when the run ended)."""
     wd = copy_workflow(tmp_path_factory.mktemp("server_killed"))
-    # a second capture set's jobs, so that some start after the server is up (it imports for seconds first)
+    # a second capture set's jobs, so that there are jobs left to start after the kill
     run = start_snakemake(wd, *run_args(wd, f"results/index/{OTHER_SET}.parquet"))
     found = {}
 
-    def listening():
+    def server_started():
         server = server_of(run.pid)
         if server is not None:
             found["pid"], found["socket"] = server
-        return server is not None and found["socket"].exists()
+        return server is not None
 
-    wait_for(listening, "warm-start server listening", run)
-    os.kill(found["pid"], signal.SIGKILL)
-    # a killed process runs no cleanup: its socket stays
-    left = found["socket"].exists()
-    started = set(job_logs(wd))
+    wait_for(server_started, "warm-start server", run)
+    # Snakemake held (SIGSTOP) while the server imports: on a loaded machine the
+    # run could otherwise start all four jobs before it listens, leaving none to
+    # meet the stale socket. One core: at most one job runs while held.
+    run.send_signal(signal.SIGSTOP)
+    try:
+        wait_for(lambda: found["socket"].exists(), "warm-start server listening")
+        os.kill(found["pid"], signal.SIGKILL)
+        # a killed process runs no cleanup: its socket stays
+        left = found["socket"].exists()
+        started = set(job_logs(wd))
+    finally:
+        run.send_signal(signal.SIGCONT)
     code = run.wait(timeout=WAIT_S)
     after = {p: worker_usage((wd / p).read_text()) for p in job_logs(wd) if p not in started}
     yield wd, code, found["socket"], left, found["socket"].exists(), after
