@@ -417,11 +417,11 @@ def capture_set_work(name):
 
 
 def job_work(rule_name, wildcards):
-    """The work of a rig job (its object and size: every resolution and
+    """The work of a rig job (its object, size and resolution: every
     lighting), a per-set job, or a training cell (an upper bound: the whole
     dataset, not its training split, times the cell's epochs)."""
     if rule_name == "rig":
-        return combine([capture_set_work(f"{wildcards.object}_{wildcards.size}_{r}_{li}") for r in config["resolutions"] for li in config["lightings"]])
+        return combine([capture_set_work(f"{wildcards.object}_{wildcards.size}_{wildcards.res}_{li}") for li in config["lightings"]])
     if rule_name != "train":
         return capture_set_work(wildcards.set)
     samples = len(planned_samples(wildcards.res)) * config["rig"]["repeats"]

@@ -382,7 +382,7 @@ def paper_jobs(nodes: dict, parents: dict, cfg: dict, jobs: pd.DataFrame) -> dic
         if rule == "ingest":
             work = work_of(n["set"])
         elif rule == "rig":
-            sets = [f"{n['object']}_{n['size']}_{r}_{li}" for r in cfg["resolutions"] for li in cfg["lightings"]]
+            sets = [f"{n['object']}_{n['size']}_{n['res']}_{li}" for li in cfg["lightings"]]
             work = costs.combine([work_of(s) for s in sets])
         elif rule in ("poses", "preprocess"):  # Snakemake's DAG labels leave their set out
             sets = [nodes[p]["set"] for p in parents[node] if nodes[p]["rule"] == "ingest"]

@@ -35,7 +35,7 @@ SET = "A_4inch_3x3_lighton"
 OTHER_SET = "A_8inch_3x3_lighton"
 TARGET = f"results/index/{SET}.parquet"
 OUTPUTS = (f"data/raw/{SET}_NLOSdata", f"results/store/{SET}.zarr", TARGET)
-RIG_LOG, INGEST_LOG = "logs/rig/A_4inch.log", f"logs/ingest/{SET}.log"
+RIG_LOG, INGEST_LOG = "logs/rig/A_4inch_3x3.log", f"logs/ingest/{SET}.log"
 LOCK_MESSAGE = "Directory cannot be locked"
 WAIT_S = 300  # a bound against a hung run, never a speed requirement
 

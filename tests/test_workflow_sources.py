@@ -30,7 +30,7 @@ RELEASE_POSES = ASSETS / "poses.json"
 
 
 def write_streams(sets: list[CaptureSet], cfg: dict, raw, catalogue) -> None:
-    """The rig's capture streams of `sets`, one object and size at a time (as the rig rule writes them)."""
+    """The rig's capture streams of `sets`, one object and size at a time (the rig rule splits them by resolution too: the same bytes)."""
     groups: dict[tuple[str, str], list[CaptureSet]] = {}
     for s in sets:
         groups.setdefault((s.object, s.size), []).append(s)

@@ -59,7 +59,7 @@ def test_every_capture_set_is_written(tiny_run):
         assert (meta["object"], meta["size"], meta["spad_res"], meta["light"]) == (s.object, s.size, s.resolution, s.light)
         h = np.load(d / "spad_histogram" / names[0])
         assert h.dtype == np.int32 and h.shape == (3, s.n_zones, s.n_zones, 128)
-    assert (tiny_run / "logs/rig/circle_8inch.log").exists()
+    assert (tiny_run / "logs/rig/circle_8inch_3x3.log").exists() and (tiny_run / "logs/rig/circle_8inch_8x8.log").exists()
 
 
 def test_stores_index_and_table4(tiny_run):
@@ -110,7 +110,7 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     out = snakemake(wd, "-n", *TINY).stdout
     jobs = job_counts(out)
     # the new object: 2 sizes x 2 resolutions x 2 lightings (preprocessed at both: Fig 14 trains at 8x8); twins per object x size
-    own = {"rig": 2, "ingest": 8, "poses": 8, "preprocess": 8, "twin": 2}
+    own = {"rig": 4, "ingest": 8, "poses": 8, "preprocess": 8, "twin": 2}
     # (the variant datasets read the objects sheet like the benchmark's: rebuilt, with the same content)
     aggregates = {"index": 1, "table4": 1, "table6": 1, "detections": 1, "dataset": 2, "variant_dataset": 2, "render_benchmark": 1, "fig18": 1}
     # the twin's calibration reads every training capture, so every calibrated twin follows it (9 + the new 2)
@@ -124,8 +124,8 @@ def test_new_object_reruns_only_its_own_jobs(tiny_run, tmp_path):
     experiments = {"evaluate": 5, "fig10": 1, "fig11": 1, "tsne": 2}
     expected = {**own, **aggregates, **training, **experiments}
     assert jobs == {**expected, "total": sum(expected.values())}
-    rig_jobs = re.findall(r"rule rig:\n    output: data/raw/(\w+?)_(4inch|8inch)_", out)
-    assert sorted(rig_jobs) == [("newplus", "4inch"), ("newplus", "8inch")]
+    rig_jobs = re.findall(r"rule rig:\n    output: data/raw/(\w+?)_(4inch|8inch)_(3x3|8x8)_", out)
+    assert sorted(rig_jobs) == [("newplus", size, res) for size in ("4inch", "8inch") for res in ("3x3", "8x8")]
     assert sorted(re.findall(r"output: results/twin/(\w+)\.zarr", out)) == ["newplus_4inch", "newplus_8inch"]
     new_sets = {f"newplus_{size}_{res}_{light}" for size in ("4inch", "8inch") for res in ("3x3", "8x8") for light in ("lighton", "lightoff")}
     assert {m for m in re.findall(r"wildcards: set=(\w+)", out)} == new_sets
