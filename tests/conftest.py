@@ -28,7 +28,9 @@ def demo_config() -> dict:
 # Makefile's `make test`) each file runs on one worker in collection order, so
 # collecting them first, longest first, starts them together and lets the
 # short unit tests fill the gaps instead of queueing the longest run last.
-E2E_FIRST = ("test_workflow_tiny.py", "test_workflow_sources.py", "test_workflow_dags.py", "test_faults.py")
+# The SLURM run is second: most of its wall time is waiting on the cluster's
+# status checks, which the other worker's tests fill.
+E2E_FIRST = ("test_workflow_tiny.py", "test_workflow_slurm.py", "test_faults.py", "test_workflow_sources.py", "test_workflow_dags.py")
 
 
 def pytest_collection_modifyitems(items):
