@@ -31,7 +31,7 @@ from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train.dataset import read_dataset
 from denali_pipe.train.metrics import regression_metrics, workspace_metrics
 from denali_pipe.train.models import cnn1d
-from denali_pipe.train.training import Hyper, fit, infer, loss_for
+from denali_pipe.train.training import Hyper, cpu_has_amx, fit, infer, loss_for, training_precision
 
 INPUTS = ("raw", "log_z", "per_sample")
 TARGETS = ("metres", "standardised")
@@ -58,7 +58,10 @@ def main() -> None:
     p.add_argument("dataset", type=Path, help="results/datasets/<res> (the .zarr and .parquet beside each other)")
     p.add_argument("--epochs", type=int, default=30)
     p.add_argument("--seeds", type=int, nargs="+", default=[42])
+    p.add_argument("--inputs", nargs="+", choices=INPUTS, default=list(INPUTS))
+    p.add_argument("--precision", choices=["auto", "float32", "bfloat16"], default="auto", help="as config train.precision")
     args = p.parse_args()
+    precision = training_precision(args.precision, "cpu", cpu_has_amx())
     x, samples, _ = read_dataset(args.dataset.with_suffix(".zarr"), args.dataset.with_suffix(".parquet"))
     y = samples[["x", "y"]].to_numpy(np.float32)
     totals = samples.assign(total=x.reshape(len(x), -1).sum(axis=1)).groupby("size")["total"].mean()
@@ -67,7 +70,7 @@ def main() -> None:
     for seed in args.seeds:
         for train_size in ("4inch", "8inch"):
             tr, va, te = size_split(samples, train_size, seed)
-            for kind in INPUTS:
+            for kind in args.inputs:
                 xn = torch.from_numpy(np.ascontiguousarray(model_input(kind, x, tr)))
                 for targets in TARGETS:
                     mu, sd = (y[tr].mean(0), y[tr].std(0)) if targets == "standardised" else (np.zeros(2, np.float32), np.ones(2, np.float32))
@@ -78,7 +81,7 @@ def main() -> None:
                         return -regression_metrics(infer(model, xn[va]) * sd + mu, y[va])["rmse"]
 
                     yt = torch.from_numpy((y - mu) / sd)
-                    fit(model, xn[tr], yt[tr], Hyper(1e-3, args.epochs, 64, kind), seed, loss_for("location"), score, name="size shift")
+                    fit(model, xn[tr], yt[tr], Hyper(1e-3, args.epochs, 64, kind), seed, loss_for("location"), score, name="size shift", precision=precision)
                     pv, pt = infer(model, xn[va]) * sd + mu, infer(model, xn[te]) * sd + mu
                     rows.append(
                         {

@@ -41,3 +41,11 @@ def test_a_record_of_another_format_or_version_is_refused_naming_the_file(record
     with pytest.raises(ValueError, match=message) as e:
         SavedCell.load(tmp_path)
     assert str(tmp_path / MODEL_FILE) in str(e.value)
+
+
+def test_a_version_1_record_reads_as_metre_outputs(record, tmp_path):
+    """Version 1 had no target_stats: its location cells regressed metres."""
+    old = {k: v for k, v in record.items() if k != "target_stats"} | {"version": 1}
+    torch.save(old, tmp_path / MODEL_FILE)
+    saved = SavedCell.load(tmp_path)
+    assert saved.target_stats is None and saved.to_record()["version"] == VERSION

@@ -108,6 +108,27 @@ def test_clean_normalisation_statistics_come_from_the_training_part_only(data):
     assert tuple(res.state["norm_stats"]) != normalise(x, "log_z")[1]
 
 
+@pytest.mark.parametrize(("task", "protocol", "standardised"), [("location", "clean", True), ("location", "paper", False), ("size", "clean", False)])
+def test_clean_location_networks_regress_positions_standardised_on_the_training_part(data, task, protocol, standardised):
+    x, samples = data
+    cell = _cell(task=task, protocol=protocol, split="location_held_out")
+    res = run_cell(x, samples, cell, Hyper(lr=1e-3, epochs=1, batch_size=64, norm="raw"), validation_fraction=0.2, factory=factory())
+    if not standardised:
+        assert res.state["target_stats"] is None
+        return
+    y, _ = targets(samples, task)
+    split, _ = partition(samples, y, cell, 0.2)
+    mean, std = np.asarray(res.state["target_stats"])
+    assert np.allclose(mean, y[split.train].mean(axis=0)) and np.allclose(std, y[split.train].std(axis=0))
+    # the network's own outputs are standardised; the cell's metrics are in metres (errors of cm, not of std units)
+    model = cnn1d("location", 2, x.shape[1:])
+    model.load_state_dict(res.state["model"])
+    raw = infer(model, torch.from_numpy(x[split.test]))
+    metres = raw * std + mean
+    assert res.metrics.test["rmse"] == pytest.approx(float(np.sqrt(np.mean((metres - y[split.test]) ** 2))), rel=1e-4)
+    assert res.metrics.test["rmse"] != pytest.approx(float(np.sqrt(np.mean((raw - y[split.test]) ** 2))), rel=1e-2)
+
+
 def test_cells_are_deterministic_and_learn(data):
     x, samples = data
     a = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory())

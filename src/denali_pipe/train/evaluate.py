@@ -27,7 +27,7 @@ from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train.cells import Cell
 from denali_pipe.train.registry import build
 from denali_pipe.train.saved_cell import SavedCell
-from denali_pipe.train.training import EVAL_BATCH, SIZE_CLASSES, Hyper, infer, task_metrics
+from denali_pipe.train.training import EVAL_BATCH, SIZE_CLASSES, Hyper, infer, task_metrics, to_metres
 
 
 @dataclass(frozen=True)
@@ -38,7 +38,10 @@ class TrainedCell:
     outputs are x, y in metres); norm_stats: `preprocess.normalise`'s (mu,
     sigma) of the cell's training part (None for raw input);
     baseline_output: what the cell's mean / majority baseline answers for
-    every sample (`train.baseline_output`: (2,) m or (C,) scores)."""
+    every sample (`train.baseline_output`: (2,) m or (C,) scores);
+    target_stats: the positions' (mean, std) per coordinate in m that map a
+    clean location network's standardised outputs back to metres
+    (`train.target_statistics`; None for metre outputs and classifiers)."""
 
     model: nn.Module
     cell: Cell
@@ -47,6 +50,7 @@ class TrainedCell:
     classes: list[str] | None
     input_shape: tuple[int, int, int]  # (n, n, T)
     baseline_output: np.ndarray
+    target_stats: tuple[tuple[float, float], tuple[float, float]] | None = None
 
 
 def load_cell(run_dir: Path) -> TrainedCell:
@@ -59,7 +63,8 @@ def load_cell(run_dir: Path) -> TrainedCell:
     model = build(saved.cell.model, saved.factory, saved.cell.task, saved.input_shape, 2 if classes is None else len(classes))
     model.load_state_dict(saved.model)
     model.eval()
-    return TrainedCell(model, saved.cell, Hyper(**saved.hyper), saved.norm_stats, classes, saved.input_shape, np.asarray(saved.baseline_output, np.float64))
+    baseline = np.asarray(saved.baseline_output, np.float64)
+    return TrainedCell(model, saved.cell, Hyper(**saved.hyper), saved.norm_stats, classes, saved.input_shape, baseline, saved.target_stats)
 
 
 def _inputs(trained: TrainedCell, x: np.ndarray) -> torch.Tensor:
@@ -70,7 +75,7 @@ def _inputs(trained: TrainedCell, x: np.ndarray) -> torch.Tensor:
 
 def predict(trained: TrainedCell, x: np.ndarray) -> np.ndarray:
     """(N, C) outputs for x (N, n, n, T): positions in metres (location) or logits."""
-    return infer(trained.model, _inputs(trained, x))
+    return to_metres(infer(trained.model, _inputs(trained, x)), trained.target_stats)
 
 
 def embed(trained: TrainedCell, x: np.ndarray) -> np.ndarray:

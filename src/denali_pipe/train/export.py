@@ -8,7 +8,8 @@ background-subtracted, aligned, cropped counts (predict.capture_features),
 any batch size B >= 1, and gives what the cell gives: (B, 2) x, y in metres
 for location, (B, C) logits for shape and size. Beside the program,
 `denali.json` (METADATA_KEY) names the task, the classes in output order,
-the input shape, the normalisation, the cell and its factory, and the crop
+the input shape, the normalisation, the position targets' standardisation
+(a clean location cell's, applied inside), the cell and its factory, and the crop
 window when given: an extra file of the `.pt2` archive, a metadata entry of
 the ONNX model. `load_export` reads both.
 """
@@ -42,20 +43,29 @@ ONNX_OPSET = 18
 
 class NormalisedModel(nn.Module):
     """`preprocess.normalise` (raw: identity; log_z: signed log1p, then the
-    cell's (x - mu) / sigma) followed by the cell's network."""
+    cell's (x - mu) / sigma) followed by the cell's network and, for a
+    network regressing standardised positions, their map back to metres
+    (`train.to_metres`: out * std + mean)."""
 
-    def __init__(self, model: nn.Module, norm: str, stats: tuple[float, float] | None):
+    def __init__(self, model: nn.Module, norm: str, stats: tuple[float, float] | None, target_stats=None):
         super().__init__()
         self.model = model
         self.log_z = norm == "log_z"
         mu, sigma = stats if stats is not None else (0.0, 1.0)
         self.register_buffer("mu", torch.tensor(float(mu)))
         self.register_buffer("sigma", torch.tensor(max(float(sigma), MIN_SIGMA)))
+        self.to_metres = target_stats is not None
+        mean, std = target_stats if target_stats is not None else ((0.0, 0.0), (1.0, 1.0))
+        self.register_buffer("target_mean", torch.tensor(mean, dtype=torch.float32))
+        self.register_buffer("target_std", torch.tensor(std, dtype=torch.float32))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if self.log_z:
             x = (torch.sign(x) * torch.log1p(x.abs()) - self.mu) / self.sigma
-        return self.model(x)
+        out = self.model(x)
+        if self.to_metres:
+            out = out * self.target_std + self.target_mean
+        return out
 
 
 def metadata(trained: TrainedCell, factory: str, window: CropWindow | None) -> dict:
@@ -68,6 +78,10 @@ def metadata(trained: TrainedCell, factory: str, window: CropWindow | None) -> d
         "input": "float32 (B, n, n, T): background-subtracted, aligned, cropped counts",
         "input_shape": list(trained.input_shape),
         "outputs": ["x_m", "y_m"] if task == "location" else "logits over classes",
+        # a clean location network regresses standardised positions; the export maps them back to metres
+        "targets": None
+        if trained.target_stats is None
+        else {"mean_m": list(trained.target_stats[0]), "std_m": list(trained.target_stats[1]), "applied": "inside"},
         "classes": trained.classes,
         "normalisation": {"kind": trained.hyper.norm, "stats": None if trained.norm_stats is None else list(trained.norm_stats), "applied": "inside"},
         "crop": None if window is None else window.to_dict(),
@@ -84,7 +98,7 @@ def export_cell(trained: TrainedCell, run_dir: Path, out: Path, window: CropWind
     if out.suffix not in FORMATS:
         raise ValueError(f"{out}: an export is a torch.export program (.pt2) or an ONNX model (.onnx), not {out.suffix or 'a file without suffix'}")
     meta = metadata(trained, SavedCell.load(run_dir).factory, window)
-    wrapper = NormalisedModel(trained.model, trained.hyper.norm, trained.norm_stats).eval()
+    wrapper = NormalisedModel(trained.model, trained.hyper.norm, trained.norm_stats, trained.target_stats).eval()
     example = (torch.zeros(2, *trained.input_shape),)
     batch = ({0: torch.export.Dim("batch", min=1)},)
     with atomic_file(out) as tmp, torch.no_grad():

@@ -5,13 +5,16 @@ The file is `torch.save` of a plain dict (loadable with
 `torch.load(path, weights_only=True)`):
 
     format          "denali-pipe cell"
-    version         1
+    version         2 (version 1, without target_stats, still reads)
     cell            the Cell's fields: model, task, split, resolution, protocol, seed, condition
     factory         the model's factory, 'package.module:factory' (registry)
     input_shape     [n, n, T]: zones per side, time bins after the crop
     classes         class names in output order (shape, size); None for location
     hyper           lr, epochs, batch_size, norm ("raw" or "log_z")
     norm_stats      [mu, sigma] of the log_z normalisation (training part); None for raw
+    target_stats    [[mean_x, mean_y], [std_x, std_y]] in m: a clean location cell's
+                    network outputs standardised positions, mapped back by these
+                    (training part); None for metre outputs (paper) and classifiers
     baseline_output the mean / majority baseline's output: (2,) m or (C,) class scores
     model           the selected epoch's state_dict
 
@@ -30,7 +33,8 @@ from denali_pipe.train.cells import Cell
 
 MODEL_FILE = "model.pt"  # in the cell's run folder
 FORMAT = "denali-pipe cell"
-VERSION = 1
+VERSION = 2
+READS = (1, 2)  # version 1 records are version 2 without target_stats
 
 
 @dataclass(frozen=True)
@@ -45,6 +49,7 @@ class SavedCell:
     norm_stats: tuple[float, float] | None
     baseline_output: list[float]
     model: dict
+    target_stats: tuple[tuple[float, float], tuple[float, float]] | None = None
 
     def to_record(self) -> dict:
         return {
@@ -58,6 +63,7 @@ class SavedCell:
             "norm_stats": None if self.norm_stats is None else [float(v) for v in self.norm_stats],
             "baseline_output": [float(v) for v in self.baseline_output],
             "model": self.model,
+            "target_stats": None if self.target_stats is None else [[float(v) for v in row] for row in self.target_stats],
         }
 
     @classmethod
@@ -65,10 +71,10 @@ class SavedCell:
         """ValueError naming `path` when `record` is not a cell record of this VERSION."""
         if not isinstance(record, dict) or record.get("format") != FORMAT:
             raise ValueError(f"{path}: not a training cell's saved model (no {FORMAT!r} record; cells saved before the record was versioned must be retrained)")
-        if record.get("version") != VERSION:
+        if record.get("version") not in READS:
             raise ValueError(f"{path}: cell record version {record.get('version')!r}; this denali-pipe reads version {VERSION}")
         try:
-            stats = record["norm_stats"]
+            stats, target = record["norm_stats"], record.get("target_stats")
             return cls(
                 cell=Cell(**record["cell"]),
                 factory=str(record["factory"]),
@@ -78,6 +84,7 @@ class SavedCell:
                 norm_stats=None if stats is None else (float(stats[0]), float(stats[1])),
                 baseline_output=[float(v) for v in record["baseline_output"]],
                 model=record["model"],
+                target_stats=None if target is None else tuple((float(row[0]), float(row[1])) for row in target),
             )
         except (KeyError, TypeError, ValueError, IndexError) as e:
             raise ValueError(f"{path}: a cell record without a valid {e}") from None

@@ -11,11 +11,16 @@ Two protocols:
 - `clean` (default): a validation part is carved out of the training split
   (the same kind of hold-out as the split itself), normalisation statistics
   come from the remaining training part only, the best validation epoch is
-  kept and the test split is evaluated once, with that model.
+  kept and the test split is evaluated once, with that model. Location
+  networks regress positions standardised on the training part (each
+  coordinate's mean and std), mapped back to metres for every metric and
+  prediction: a network's outputs start near zero, that is at the training
+  mean, and an input unlike the training ones (a held-out size, several
+  times brighter) moves them in units of the training spread, not of metres.
 
 Training follows the reference (docs/deviations.md): Adam (betas 0.9/0.999, no weight decay,
-no schedule), cross-entropy for classification, summed MSE on metre targets
-for regression; the best epoch is chosen on Top-1 (classification) or MAE
+no schedule), cross-entropy for classification, summed MSE on the position
+targets for regression (metres; clean: standardised, see above); the best epoch is chosen on Top-1 (classification) or MAE
 (regression). Batches are drawn by indexing one in-memory tensor (no
 DataLoader: its per-batch overhead halves throughput for models this small).
 """
@@ -49,6 +54,7 @@ log = logging.getLogger(__name__)
 
 SIZE_CLASSES = ("4inch", "8inch")
 EVAL_BATCH = 1024
+MIN_TARGET_STD = 1e-3  # m: a training part at one position still standardises
 
 
 @dataclass(frozen=True)
@@ -99,6 +105,32 @@ def targets(samples: pd.DataFrame, task: str) -> tuple[np.ndarray, list[str] | N
             raise ValueError(f"unknown sizes {bad}; expected {SIZE_CLASSES}")
         return samples["size"].map({s: i for i, s in enumerate(SIZE_CLASSES)}).to_numpy(np.int64), list(SIZE_CLASSES)
     raise ValueError(f"unknown task {task!r}; expected one of {TASKS}")
+
+
+def target_statistics(task: str, protocol: str, y_train: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """((mean_x, mean_y), (std_x, std_y)) in m of the training positions
+    y_train (N, 2) for a clean location cell, whose network regresses
+    standardised positions; None (metre or class targets) otherwise."""
+    if task != "location" or protocol != "clean":
+        return None
+    mean, std = y_train.astype(np.float64).mean(axis=0), np.maximum(y_train.astype(np.float64).std(axis=0), MIN_TARGET_STD)
+    return (float(mean[0]), float(mean[1])), (float(std[0]), float(std[1]))
+
+
+def standardise(y: np.ndarray, target_stats) -> np.ndarray:
+    """Positions (N, 2) m as the network regresses them (`target_statistics`); y itself without stats."""
+    if target_stats is None:
+        return y
+    mean, std = np.asarray(target_stats, np.float32)
+    return ((y - mean) / std).astype(np.float32)
+
+
+def to_metres(out: np.ndarray, target_stats) -> np.ndarray:
+    """A network's outputs (N, C) as metres or logits: standardised positions mapped back; else unchanged."""
+    if target_stats is None:
+        return out
+    mean, std = np.asarray(target_stats, np.float32)
+    return out * std + mean
 
 
 def partition(samples: pd.DataFrame, y: np.ndarray, cell: Cell, validation_fraction: float) -> tuple[Split, np.ndarray | None]:
@@ -170,7 +202,7 @@ def selection_key(task: str) -> tuple[str, int]:
 
 
 def loss_for(task: str) -> nn.Module:
-    """The reference's losses: summed MSE on metre targets (location),
+    """The reference's losses: summed MSE on position targets (location),
     cross-entropy on logits (classification)."""
     return nn.MSELoss(reduction="sum") if task == "location" else nn.CrossEntropyLoss()
 
@@ -309,7 +341,8 @@ def run_cell(
         _, stats = normalise(x[split.train], hp.norm)
         xn = normalise(x, hp.norm, stats)[0]
     xn = torch.from_numpy(xn)
-    yt = torch.from_numpy(np.array(y))  # pandas hands out read-only views
+    target_stats = target_statistics(cell.task, cell.protocol, y[split.train])
+    yt = torch.from_numpy(np.array(standardise(y, target_stats)))  # pandas hands out read-only views
     n_classes = 2 if cell.task == "location" else len(classes)
 
     input_shape = tuple(int(d) for d in x.shape[1:])
@@ -322,9 +355,9 @@ def run_cell(
 
     def evaluate_epoch(epoch: int, seen: np.ndarray, out: np.ndarray) -> float:
         # training metrics from the epoch's own (train-mode) outputs: free, as the paper's curves
-        rows.extend(metric_rows(epoch, "train", task_metrics(cell.task, out, y[split.train][seen])))
+        rows.extend(metric_rows(epoch, "train", task_metrics(cell.task, to_metres(out, target_stats), y[split.train][seen])))
         # selection scores in the training precision (half the time of float32 on AMX); the test split's in float32
-        sel = task_metrics(cell.task, infer(model, x_sel, dev, precision), y_sel)
+        sel = task_metrics(cell.task, to_metres(infer(model, x_sel, dev, precision), target_stats), y_sel)
         rows.extend(metric_rows(epoch, select_on[0], sel))
         return sign * sel[metric]
 
@@ -332,7 +365,7 @@ def run_cell(
     fitted = fit(model, xn[split.train].to(dev), yt[split.train].to(dev), hp, cell.seed, loss_for(cell.task), evaluate_epoch, budget_seconds, name, precision)
 
     t0 = time.perf_counter()
-    test_out = infer(model, xn[split.test], dev)
+    test_out = to_metres(infer(model, xn[split.test], dev), target_stats)
     infer_seconds = time.perf_counter() - t0
     test = task_metrics(cell.task, test_out, y[split.test])
     if val is not None:
@@ -375,6 +408,7 @@ def run_cell(
         # what the cell's mean / majority baseline predicts, so that a saved cell scores its baseline on other data
         baseline_output=[float(v) for v in baseline_output(cell.task, y[split.train], n_classes)],
         model=fitted.state,
+        target_stats=target_stats,
     )
     return Result(result, pd.DataFrame(rows, columns=["epoch", "part", "metric", "value"]), state.to_record())
 
