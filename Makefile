@@ -19,9 +19,11 @@ run: setup
 
 # One pytest worker per core, a test file per worker (module fixtures such as
 # the tiny DAG run are built once): the end-to-end runs overlap with each
-# other and with the unit tests (tests/conftest.py collects them first).
+# other and with the unit tests (tests/conftest.py collects them first;
+# --no-loadscope-reorder keeps that order, where xdist would hand out the
+# files with the most tests first and leave the one-test SLURM run to the end).
 test: setup lint
-	python -m pytest -n auto --dist loadfile
+	python -m pytest -n auto --dist loadfile --no-loadscope-reorder
 
 # The style holds without anyone policing it: ruff (lint, format) on the
 # Python, snakefmt on the workflow, import-linter's layer contracts on the

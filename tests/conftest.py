@@ -25,12 +25,13 @@ def demo_config() -> dict:
 
 
 # The end-to-end files run whole DAGs for minutes; under `pytest -n` (the
-# Makefile's `make test`) each file runs on one worker in collection order, so
-# collecting them first, longest first, starts them together and lets the
-# short unit tests fill the gaps instead of queueing the longest run last.
-# The SLURM run is second: most of its wall time is waiting on the cluster's
-# status checks, which the other worker's tests fill.
-E2E_FIRST = ("test_workflow_tiny.py", "test_workflow_slurm.py", "test_faults.py", "test_workflow_sources.py", "test_workflow_dags.py")
+# Makefile's `make test`, with --no-loadscope-reorder) each file runs on one
+# worker in collection order, two queued per worker from the start. So the
+# tiny rule all (~8 min within the suite) and the SLURM run (~4 min, mostly
+# waiting on the cluster's status checks, which the other worker's tests
+# fill) start at once, the tiny run's worker queues the short DAG builds and
+# the SLURM run's the sources and fault runs; the unit tests fill the rest.
+E2E_FIRST = ("test_workflow_tiny.py", "test_workflow_slurm.py", "test_workflow_dags.py", "test_workflow_sources.py", "test_faults.py")
 
 
 def pytest_collection_modifyitems(items):
