@@ -31,7 +31,7 @@ from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train.dataset import read_dataset
 from denali_pipe.train.metrics import regression_metrics, workspace_metrics
 from denali_pipe.train.models import cnn1d
-from denali_pipe.train.training import Hyper, cpu_has_amx, fit, infer, loss_for, training_precision
+from denali_pipe.train.training import Hyper, cpu_has_amx, fit, infer, loss_for, standardise, target_statistics, to_metres, training_precision
 
 INPUTS = ("raw", "log_z", "per_sample")
 TARGETS = ("metres", "standardised")
@@ -73,16 +73,17 @@ def main() -> None:
             for kind in args.inputs:
                 xn = torch.from_numpy(np.ascontiguousarray(model_input(kind, x, tr)))
                 for targets in TARGETS:
-                    mu, sd = (y[tr].mean(0), y[tr].std(0)) if targets == "standardised" else (np.zeros(2, np.float32), np.ones(2, np.float32))
+                    # the clean protocol's own standardisation (train.training), or metres
+                    stats = target_statistics("location", "clean", y[tr]) if targets == "standardised" else None
                     torch.manual_seed(seed)
                     model = cnn1d("location", 2, x.shape[1:])
 
-                    def score(epoch, rows_seen, out, model=model, xn=xn, mu=mu, sd=sd, va=va):
-                        return -regression_metrics(infer(model, xn[va]) * sd + mu, y[va])["rmse"]
+                    def score(epoch, rows_seen, out, model=model, xn=xn, stats=stats, va=va):
+                        return -regression_metrics(to_metres(infer(model, xn[va]), stats), y[va])["rmse"]
 
-                    yt = torch.from_numpy((y - mu) / sd)
+                    yt = torch.from_numpy(np.array(standardise(y, stats)))
                     fit(model, xn[tr], yt[tr], Hyper(1e-3, args.epochs, 64, kind), seed, loss_for("location"), score, name="size shift", precision=precision)
-                    pv, pt = infer(model, xn[va]) * sd + mu, infer(model, xn[te]) * sd + mu
+                    pv, pt = to_metres(infer(model, xn[va]), stats), to_metres(infer(model, xn[te]), stats)
                     rows.append(
                         {
                             "seed": seed, "train": train_size, "input": kind, "targets": targets,

@@ -20,8 +20,8 @@ Two protocols:
 
 Training follows the reference (docs/deviations.md): Adam (betas 0.9/0.999, no weight decay,
 no schedule), cross-entropy for classification, summed MSE on the position
-targets for regression (metres; clean: standardised, see above); the best epoch is chosen on Top-1 (classification) or MAE
-(regression). Batches are drawn by indexing one in-memory tensor (no
+targets for regression (metres; clean: standardised, see above); the best
+epoch is chosen on Top-1 (classification) or MAE (regression). Batches are drawn by indexing one in-memory tensor (no
 DataLoader: its per-batch overhead halves throughput for models this small).
 """
 
