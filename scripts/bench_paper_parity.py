@@ -4,15 +4,16 @@
     python scripts/bench_paper_parity.py data/raw                       # the tree the workflow ran on, seeds 42 43 44
     python scripts/bench_paper_parity.py data/raw --epochs 5 --seeds 42 # a quick look: every cell capped at 5 epochs
 
-Both sides read the same capture tree. Ours: the benchmark's 3x3 base-object
-stores (`--stores`, ingested from the tree), `train.paper_inputs` and
+Both sides read the same capture tree. Ours: the workflow's `paper` dataset
+of it (`--dataset`, what rule paper_dataset wrote from the tree's 3x3
+base-object stores and what the workflow's `paper` cells train on) and
 `train.run_cell` under `paper` with `train.models.cnn1d`'s settings. Theirs:
 the release's `main_table` (`--reference`, MIT; imported here only, never by
 the project), run unmodified: `DataSet.from_raw_captures` on the raw tree,
 `query_data` as its `build_query` calls it, and `train_regression_experiment`
 / `train_classification_experiment` with its `reg_1dcnn`, `obj_1dcnn` and
-`size_1dcnn` cells' settings. Location labels are our calibration's tag-1
-positions (`--positions`), handed to the reference as its
+`size_1dcnn` cells' settings. Location labels are the dataset's (our
+calibration's tag-1 positions), handed to the reference as its
 `tag1_positions.json`. Each seed is the split's random_state and the weights'
 seed on both sides (as the reference's code does with one number). Its object
 cell always has 30 outputs; ours has one per shape in the tree (the same on
@@ -39,11 +40,8 @@ import pandas as pd
 import torch
 import yaml
 
-from denali_pipe.core.capture_sets import parse_set_name
-from denali_pipe.core.objects import load_catalogue
 from denali_pipe.train.cells import TASKS, Cell
-from denali_pipe.train.dataset import location_labels
-from denali_pipe.train.paper_inputs import paper_samples
+from denali_pipe.train.dataset import read_dataset
 from denali_pipe.train.training import Hyper, run_cell
 
 REPO = Path(__file__).resolve().parents[1]
@@ -67,18 +65,6 @@ def reference_modules(path: Path):
         sys.path.remove(str(path))
 
 
-def benchmark_stores(stores: Path, catalogue) -> list[Path]:
-    """Every 3x3 base-object store under `stores` (the workflow's benchmark_sets)."""
-    found = []
-    for p in sorted(stores.glob("*.zarr")):
-        cs = parse_set_name(p.name.removesuffix(".zarr"))
-        if cs.resolution == RESOLUTION and not cs.is_background and cs.object in catalogue and catalogue[cs.object].variant == "base":
-            found.append(p)
-    if not found:
-        raise FileNotFoundError(f"{stores}: no {RESOLUTION} base-object capture stores")
-    return found
-
-
 def reference_cell(main_table, training, query, task: str, seed: int, epochs: int | None, device: str) -> dict:
     cell = main_table.CELLS[CELLS[task][0]]
     cfg = cell.config
@@ -100,9 +86,7 @@ def main() -> None:
     cfg = yaml.safe_load((REPO / "config/config.yaml").read_text())
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("raw", type=Path, help="the capture tree in the release layout (<set>_NLOSdata/ folders)")
-    p.add_argument("--stores", type=Path, default=Path("results/store"), help="its ingested stores")
-    p.add_argument("--positions", type=Path, default=Path("results/calibration/tag1_positions.parquet"), help="location labels")
-    p.add_argument("--objects-sheet", type=Path, default=REPO / "config/objects.tsv")
+    p.add_argument("--dataset", type=Path, default=Path(f"results/datasets/paper/{RESOLUTION}"), help="the workflow's paper dataset of it (.zarr, .parquet)")
     p.add_argument("--reference", type=Path, default=REPO.parent / "shared/reference/benchmark", help="the release's benchmark folder")
     p.add_argument("--seeds", type=int, nargs="+", default=[42, 43, 44])
     p.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS)
@@ -113,19 +97,17 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     main_table, data, training = reference_modules(args.reference)
 
-    catalogue = load_catalogue(args.objects_sheet)
-    positions = pd.read_parquet(args.positions)
-    labels = location_labels(positions)
-    x, samples = paper_samples(benchmark_stores(args.stores, catalogue), catalogue, labels)
+    x, samples, _ = read_dataset(args.dataset.with_suffix(".zarr"), args.dataset.with_suffix(".parquet"))
+    labels = samples.groupby("location")[["x", "y"]].first()
     with tempfile.TemporaryDirectory() as tmp:
         tag1 = Path(tmp) / "tag1_positions.json"
-        tag1.write_text(json.dumps({f"frame{k}_tag1": [x_, y_, 0.0] for k, (x_, y_) in labels.items()}))
+        tag1.write_text(json.dumps({f"frame{k}_tag1": [x_, y_, 0.0] for k, x_, y_ in labels.itertuples()}))
         query = data.DataSet.from_raw_captures(args.raw).query_data(
             capture_resolutions=[RESOLUTION], average_spad_histograms=False,
             location_mapping=data.load_capture_number_to_location_mapping(tag1), included_objects=data.BASE_OBJECTS,
         )  # fmt: skip
     if len(query["names"]) != len(samples):
-        raise ValueError(f"the reference's query holds {len(query['names'])} samples, the stores {len(samples)}: not the same tree")
+        raise ValueError(f"the reference's query holds {len(query['names'])} samples, {args.dataset} {len(samples)}: not the same tree")
     print(f"{len(samples):,} samples ({samples['set'].nunique()} sets); device {args.device}, {args.threads} thread(s), float32; "
           f"epochs {'the paper' if args.epochs is None else f'capped at {args.epochs}'}; torch {torch.__version__}", flush=True)  # fmt: skip
 
