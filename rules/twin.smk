@@ -3,7 +3,7 @@
 # training captures), the twin's calibration, the renderers' cost vs
 # fidelity benchmark, and Fig 18.
 
-from denali_pipe.twin.selection import fig18_sets, twin_pairs
+from denali_pipe.twin.selection import RESOLUTION as TWIN_RESOLUTION, fig18_sets, twin_pairs
 
 TWIN_PAIRS = twin_pairs(CATALOGUE, config)
 TWIN_MESHES = [f for name, size in TWIN_PAIRS for f in rig_mesh_files(SimpleNamespace(object=name, size=size))]
@@ -14,7 +14,7 @@ TWIN_SCENE_KEYS = ("wall_albedo", "object_albedo", "table", "table_albedo", "foo
 TWIN_JOB_CONFIG = json.dumps(
     {
         "seed": config["seed"],
-        "resolutions": config["resolutions"],
+        "resolutions": [TWIN_RESOLUTION],
         "twin": {
             **{k: TWIN[k] for k in ("renderer", *TWIN_SCENE_KEYS)},
             TWIN["renderer"]: TWIN[TWIN["renderer"]],

@@ -40,6 +40,7 @@ from denali_pipe.core.meshes import object_mesh
 from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.core.seeds import derive_seed
 from denali_pipe.twin.layout import TwinScene, load_calibration, material_of, twin_scene
+from denali_pipe.twin.selection import RESOLUTION
 
 log = logging.getLogger(__name__)
 
@@ -156,7 +157,7 @@ class Twin:
     histograms: dict[str, np.ndarray]
     attrs: dict
 
-    def histogram(self, location: int, res: str = "3x3") -> np.ndarray:
+    def histogram(self, location: int, res: str = RESOLUTION) -> np.ndarray:
         """(n, n, N_BINS): every zone of the `res` grid at `location`."""
         if res not in self.histograms:
             raise KeyError(f"{self.path}: the twin holds no {res} grid (it has {sorted(self.histograms)}); render it with resolutions including {res}")

@@ -6,6 +6,11 @@ from denali_pipe.core.capture_sets import CaptureSet, select_objects
 from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.core.seeds import rng_for
 
+# The resolution the DAG renders twins at: every reader of a twin (the sim-to-real
+# fit, Figs 9 and 18, the explorer) reads the 3x3 zones, as the reference's
+# twin models its 3x3 centre zone; render_twin draws any grid it is given.
+RESOLUTION = "3x3"
+
 
 def twin_pairs(catalogue: dict[str, ObjectSpec], config: dict) -> list[tuple[str, str]]:
     """(object name, size) of every configured object size: one twin job each
