@@ -9,8 +9,10 @@ ways (4 in -> 8 in, 8 in -> 4 in), under each combination of
   training part) or `per_sample` (each sample over its own summed |counts|,
   scaled by the number of values: blind to the return's amplitude, which
   scales with the object's area);
-- the targets: `metres` (the reference's) or `standardised` (z-scored on
-  the training part, the predictions mapped back).
+- the targets: `metres` (the reference's), `standardised` (z-scored on
+  the training part, the predictions mapped back) or `bounded` (standardised
+  through the clean protocol's bounded head, `train.training.position_head`:
+  a tanh into the training positions' box and half a gantry step).
 The validation part is 20 % of the training size's (set, location) capture
 groups, as the clean protocol draws it for this split (`splits.validation_split`):
 it shares the training size, so it cannot show the size shift itself. Each row:
@@ -31,10 +33,21 @@ from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train.dataset import read_dataset
 from denali_pipe.train.metrics import regression_metrics, workspace_metrics
 from denali_pipe.train.models import cnn1d
-from denali_pipe.train.training import Hyper, cpu_has_amx, fit, infer, loss_for, standardise, target_statistics, to_metres, training_precision
+from denali_pipe.train.training import (
+    Hyper,
+    cpu_has_amx,
+    fit,
+    infer,
+    loss_for,
+    position_head,
+    standardise,
+    target_statistics,
+    to_metres,
+    training_precision,
+)
 
 INPUTS = ("raw", "log_z", "per_sample")
-TARGETS = ("metres", "standardised")
+TARGETS = ("metres", "standardised", "bounded")
 
 
 def model_input(kind: str, x: np.ndarray, train: np.ndarray) -> np.ndarray:
@@ -59,6 +72,7 @@ def main() -> None:
     p.add_argument("--epochs", type=int, default=30)
     p.add_argument("--seeds", type=int, nargs="+", default=[42])
     p.add_argument("--inputs", nargs="+", choices=INPUTS, default=list(INPUTS))
+    p.add_argument("--targets", nargs="+", choices=TARGETS, default=list(TARGETS))
     p.add_argument("--precision", choices=["auto", "float32", "bfloat16"], default="auto", help="as config train.precision")
     args = p.parse_args()
     precision = training_precision(args.precision, "cpu", cpu_has_amx())
@@ -72,9 +86,9 @@ def main() -> None:
             tr, va, te = size_split(samples, train_size, seed)
             for kind in args.inputs:
                 xn = torch.from_numpy(np.ascontiguousarray(model_input(kind, x, tr)))
-                for targets in TARGETS:
-                    # the clean protocol's own standardisation (train.training), or metres
-                    stats = target_statistics("location", "clean", y[tr]) if targets == "standardised" else None
+                for targets in args.targets:
+                    # the clean protocol's own standardisation and box (train.training); its first two rows alone map without the bound
+                    stats = None if targets == "metres" else target_statistics("location", "clean", y[tr])[: 2 if targets == "standardised" else 4]
                     torch.manual_seed(seed)
                     model = cnn1d("location", 2, x.shape[1:])
 
@@ -82,7 +96,8 @@ def main() -> None:
                         return -regression_metrics(to_metres(infer(model, xn[va]), stats), y[va])["rmse"]
 
                     yt = torch.from_numpy(np.array(standardise(y, stats)))
-                    fit(model, xn[tr], yt[tr], Hyper(1e-3, args.epochs, 64, kind), seed, loss_for("location"), score, name="size shift", precision=precision)
+                    fit(model, xn[tr], yt[tr], Hyper(1e-3, args.epochs, 64, kind), seed, loss_for("location"), score, name="size shift", precision=precision,
+                        head=position_head(stats))  # fmt: skip
                     pv, pt = to_metres(infer(model, xn[va]), stats), to_metres(infer(model, xn[te]), stats)
                     rows.append(
                         {

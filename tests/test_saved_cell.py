@@ -1,11 +1,12 @@
 """model.pt as a versioned record: what it holds, and what it refuses."""
 
+import numpy as np
 import pytest
 import torch
 from test_train import HP, _cell, data, factory  # noqa: F401 (the fixture)
 
 from denali_pipe.train.saved_cell import FORMAT, MODEL_FILE, VERSION, SavedCell
-from denali_pipe.train.training import run_cell
+from denali_pipe.train.training import run_cell, to_metres
 
 
 @pytest.fixture(scope="module")
@@ -49,3 +50,12 @@ def test_a_version_1_record_reads_as_metre_outputs(record, tmp_path):
     torch.save(old, tmp_path / MODEL_FILE)
     saved = SavedCell.load(tmp_path)
     assert saved.target_stats is None and saved.to_record()["version"] == VERSION
+
+
+def test_a_version_2_record_reads_as_unbounded_standardised_outputs(record, tmp_path):
+    """Version 2 held a clean location cell's mean and std, not its box: it maps back without the bounded head."""
+    old = record | {"version": 2, "target_stats": [[1.0, 0.3], [0.1, 0.05]]}
+    torch.save(old, tmp_path / MODEL_FILE)
+    saved = SavedCell.load(tmp_path)
+    assert saved.target_stats == ((1.0, 0.3), (0.1, 0.05))
+    assert to_metres(np.array([[50.0, -50.0]], np.float32), saved.target_stats)[0].tolist() == pytest.approx([6.0, -2.2])

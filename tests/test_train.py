@@ -8,11 +8,12 @@ import pandas as pd
 import pytest
 import torch
 
+from denali_pipe.core.geometry import WORKSPACE_MARGIN
 from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train.cells import Cell
 from denali_pipe.train.classical import run_linear
 from denali_pipe.train.models import PAPER_MODELS, cnn1d
-from denali_pipe.train.training import Hyper, fit, infer, loss_for, partition, run_cell, targets, training_device, training_precision
+from denali_pipe.train.training import Hyper, fit, infer, loss_for, partition, run_cell, targets, to_metres, training_device, training_precision
 
 CLASSES = ("A", "B", "circle")
 N_LOC, REPEATS, BINS = 8, 3, 24
@@ -118,15 +119,34 @@ def test_clean_location_networks_regress_positions_standardised_on_the_training_
         return
     y, _ = targets(samples, task)
     split, _ = partition(samples, y, cell, 0.2)
-    mean, std = np.asarray(res.state["target_stats"])
+    mean, std, lo, hi = np.asarray(res.state["target_stats"])
     assert np.allclose(mean, y[split.train].mean(axis=0)) and np.allclose(std, y[split.train].std(axis=0))
-    # the network's own outputs are standardised; the cell's metrics are in metres (errors of cm, not of std units)
+    assert np.allclose(lo, y[split.train].min(axis=0) - WORKSPACE_MARGIN) and np.allclose(hi, y[split.train].max(axis=0) + WORKSPACE_MARGIN)
+    # the network's own outputs are standardised, through the bounded head; the cell's metrics are in metres (errors of cm, not of std units)
     model = cnn1d("location", 2, x.shape[1:])
     model.load_state_dict(res.state["model"])
     raw = infer(model, torch.from_numpy(x[split.test]))
-    metres = raw * std + mean
+    lo_z, hi_z = (lo - mean) / std, (hi - mean) / std
+    metres = mean + std * ((hi_z + lo_z) / 2 + (hi_z - lo_z) / 2 * np.tanh((raw - (hi_z + lo_z) / 2) / ((hi_z - lo_z) / 2)))
     assert res.metrics.test["rmse"] == pytest.approx(float(np.sqrt(np.mean((metres - y[split.test]) ** 2))), rel=1e-4)
     assert res.metrics.test["rmse"] != pytest.approx(float(np.sqrt(np.mean((raw - y[split.test]) ** 2))), rel=1e-2)
+
+
+def test_the_bounded_head_keeps_positions_in_the_box_whatever_the_input(data):
+    """Inputs far brighter than any training one (a held-out size) drive the
+    network's raw outputs far out; its positions stay inside the training box."""
+    x, samples = data
+    cell = _cell(task="location", split="size_held_out")
+    res = run_cell(x, samples, cell, Hyper(lr=1e-3, epochs=2, batch_size=64, norm="raw"), validation_fraction=0.2, factory=factory())
+    stats = res.state["target_stats"]
+    model = cnn1d("location", 2, x.shape[1:])
+    model.load_state_dict(res.state["model"])
+    raw = infer(model, torch.from_numpy(x * 1000))
+    lo, hi = np.asarray(stats[2:])
+    unbounded = to_metres(raw, stats[:2])
+    assert ((unbounded < lo) | (unbounded > hi)).any()  # the input does leave the box without the head
+    bounded = to_metres(raw, stats)
+    assert ((bounded >= lo - 1e-6) & (bounded <= hi + 1e-6)).all()  # float32 at a wall
 
 
 def test_cells_are_deterministic_and_learn(data):

@@ -39,9 +39,10 @@ class TrainedCell:
     sigma) of the cell's training part (None for raw input);
     baseline_output: what the cell's mean / majority baseline answers for
     every sample (`train.baseline_output`: (2,) m or (C,) scores);
-    target_stats: the positions' (mean, std) per coordinate in m that map a
-    clean location network's standardised outputs back to metres
-    (`train.target_statistics`; None for metre outputs and classifiers)."""
+    target_stats: the positions' (mean, std) per coordinate in m, and the
+    box (lo, hi) its bounded head keeps them in, that map a clean location
+    network's standardised outputs back to metres (`train.target_statistics`;
+    None for metre outputs and classifiers)."""
 
     model: nn.Module
     cell: Cell
@@ -50,7 +51,7 @@ class TrainedCell:
     classes: list[str] | None
     input_shape: tuple[int, int, int]  # (n, n, T)
     baseline_output: np.ndarray
-    target_stats: tuple[tuple[float, float], tuple[float, float]] | None = None
+    target_stats: tuple[tuple[float, float], ...] | None = None
 
 
 def load_cell(run_dir: Path) -> TrainedCell:

@@ -9,7 +9,7 @@ any batch size B >= 1, and gives what the cell gives: (B, 2) x, y in metres
 for location, (B, C) logits for shape and size. Beside the program,
 `denali.json` (METADATA_KEY) names the task, the classes in output order,
 the input shape, the normalisation, the position targets' standardisation
-(a clean location cell's, applied inside), the cell and its factory, and the crop
+and box (a clean location cell's bounded head, applied inside), the cell and its factory, and the crop
 window when given: an extra file of the `.pt2` archive, a metadata entry of
 the ONNX model. `load_export` reads both.
 """
@@ -29,6 +29,7 @@ from denali_pipe.core.atomic import atomic_file
 from denali_pipe.preprocess.histograms import CropWindow
 from denali_pipe.train.evaluate import TrainedCell
 from denali_pipe.train.saved_cell import SavedCell
+from denali_pipe.train.training import standardised_box
 
 FORMAT = "denali-pipe export"
 VERSION = 2  # 1 was a TorchScript archive, deprecated in torch 2.13
@@ -44,8 +45,8 @@ ONNX_OPSET = 18
 class NormalisedModel(nn.Module):
     """`preprocess.normalise` (raw: identity; log_z: signed log1p, then the
     cell's (x - mu) / sigma) followed by the cell's network and, for a
-    network regressing standardised positions, their map back to metres
-    (`train.to_metres`: out * std + mean)."""
+    network regressing standardised positions, their bounded head (where the
+    record has a box) and map back to metres (`train.to_metres`)."""
 
     def __init__(self, model: nn.Module, norm: str, stats: tuple[float, float] | None, target_stats=None):
         super().__init__()
@@ -55,14 +56,22 @@ class NormalisedModel(nn.Module):
         self.register_buffer("mu", torch.tensor(float(mu)))
         self.register_buffer("sigma", torch.tensor(max(float(sigma), MIN_SIGMA)))
         self.to_metres = target_stats is not None
-        mean, std = target_stats if target_stats is not None else ((0.0, 0.0), (1.0, 1.0))
+        mean, std = target_stats[:2] if target_stats is not None else ((0.0, 0.0), (1.0, 1.0))
         self.register_buffer("target_mean", torch.tensor(mean, dtype=torch.float32))
         self.register_buffer("target_std", torch.tensor(std, dtype=torch.float32))
+        box = standardised_box(target_stats)
+        self.bounded = box is not None
+        lo, hi = box if box is not None else ((-1.0, -1.0), (1.0, 1.0))
+        # the bounded head as train.training._bounded computes it: mid + half * tanh((out - mid) / half)
+        self.register_buffer("box_mid", (torch.tensor(hi) + torch.tensor(lo)) / 2)
+        self.register_buffer("box_half", (torch.tensor(hi) - torch.tensor(lo)) / 2)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if self.log_z:
             x = (torch.sign(x) * torch.log1p(x.abs()) - self.mu) / self.sigma
         out = self.model(x)
+        if self.bounded:
+            out = self.box_mid + self.box_half * torch.tanh((out - self.box_mid) / self.box_half)
         if self.to_metres:
             out = out * self.target_std + self.target_mean
         return out
@@ -81,7 +90,12 @@ def metadata(trained: TrainedCell, factory: str, window: CropWindow | None) -> d
         # a clean location network regresses standardised positions; the export maps them back to metres
         "targets": None
         if trained.target_stats is None
-        else {"mean_m": list(trained.target_stats[0]), "std_m": list(trained.target_stats[1]), "applied": "inside"},
+        else {
+            "mean_m": list(trained.target_stats[0]),
+            "std_m": list(trained.target_stats[1]),
+            "box_m": [list(row) for row in trained.target_stats[2:4]] or None,
+            "applied": "inside",
+        },
         "classes": trained.classes,
         "normalisation": {"kind": trained.hyper.norm, "stats": None if trained.norm_stats is None else list(trained.norm_stats), "applied": "inside"},
         "crop": None if window is None else window.to_dict(),

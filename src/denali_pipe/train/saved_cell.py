@@ -5,16 +5,18 @@ The file is `torch.save` of a plain dict (loadable with
 `torch.load(path, weights_only=True)`):
 
     format          "denali-pipe cell"
-    version         2 (version 1, without target_stats, still reads)
+    version         3 (versions 1, without target_stats, and 2, without its box, still read)
     cell            the Cell's fields: model, task, split, resolution, protocol, seed, condition
     factory         the model's factory, 'package.module:factory' (registry)
     input_shape     [n, n, T]: zones per side, time bins after the crop
     classes         class names in output order (shape, size); None for location
     hyper           lr, epochs, batch_size, norm ("raw" or "log_z")
     norm_stats      [mu, sigma] of the log_z normalisation (training part); None for raw
-    target_stats    [[mean_x, mean_y], [std_x, std_y]] in m: a clean location cell's
-                    network outputs standardised positions, mapped back by these
-                    (training part); None for metre outputs (paper) and classifiers
+    target_stats    [[mean_x, mean_y], [std_x, std_y], [lo_x, lo_y], [hi_x, hi_y]] in m:
+                    a clean location cell's network outputs standardised
+                    positions, bounded into the box lo-hi and mapped back by
+                    these (training part; `train.training.target_statistics`);
+                    None for metre outputs (paper) and classifiers
     baseline_output the mean / majority baseline's output: (2,) m or (C,) class scores
     model           the selected epoch's state_dict
 
@@ -33,8 +35,8 @@ from denali_pipe.train.cells import Cell
 
 MODEL_FILE = "model.pt"  # in the cell's run folder
 FORMAT = "denali-pipe cell"
-VERSION = 2
-READS = (1, 2)  # version 1 records are version 2 without target_stats
+VERSION = 3
+READS = (1, 2, 3)  # version 1 records are version 3 without target_stats, version 2 ones without its box (unbounded)
 
 
 @dataclass(frozen=True)
@@ -49,7 +51,7 @@ class SavedCell:
     norm_stats: tuple[float, float] | None
     baseline_output: list[float]
     model: dict
-    target_stats: tuple[tuple[float, float], tuple[float, float]] | None = None
+    target_stats: tuple[tuple[float, float], ...] | None = None
 
     def to_record(self) -> dict:
         return {

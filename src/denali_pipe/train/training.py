@@ -13,10 +13,12 @@ Two protocols:
   come from the remaining training part only, the best validation epoch is
   kept and the test split is evaluated once, with that model. Location
   networks regress positions standardised on the training part (each
-  coordinate's mean and std), mapped back to metres for every metric and
-  prediction: a network's outputs start near zero, that is at the training
-  mean, and an input unlike the training ones (a held-out size, several
-  times brighter) moves them in units of the training spread, not of metres.
+  coordinate's mean and std), through a bounded head (a tanh into the
+  training positions' box and half a gantry step), mapped back to metres for
+  every metric and prediction: a network's outputs start near zero, that is
+  at the training mean, an input unlike the training ones (a held-out size,
+  several times brighter) moves them in units of the training spread, not of
+  metres, and no input moves them out of the box.
 
 Training follows the reference (docs/deviations.md): Adam (betas 0.9/0.999, no weight decay,
 no schedule), cross-entropy for classification, summed MSE on the position
@@ -40,6 +42,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
+from denali_pipe.core.geometry import WORKSPACE_MARGIN
 from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train import metrics as M
 from denali_pipe.train import paper_inputs
@@ -107,29 +110,66 @@ def targets(samples: pd.DataFrame, task: str) -> tuple[np.ndarray, list[str] | N
     raise ValueError(f"unknown task {task!r}; expected one of {TASKS}")
 
 
-def target_statistics(task: str, protocol: str, y_train: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]] | None:
-    """((mean_x, mean_y), (std_x, std_y)) in m of the training positions
-    y_train (N, 2) for a clean location cell, whose network regresses
-    standardised positions; None (metre or class targets) otherwise."""
+def target_statistics(task: str, protocol: str, y_train: np.ndarray) -> tuple[tuple[float, float], ...] | None:
+    """((mean_x, mean_y), (std_x, std_y), (lo_x, lo_y), (hi_x, hi_y)) in m of
+    the training positions y_train (N, 2) for a clean location cell, whose
+    network regresses standardised positions through a bounded head
+    (`position_head`): lo and hi are the training positions' box widened by
+    the workspace's margin (geometry.WORKSPACE_MARGIN, half a gantry step).
+    None (metre or class targets) otherwise. The first two rows alone
+    (records of version 2) map without a bound."""
     if task != "location" or protocol != "clean":
         return None
-    mean, std = y_train.astype(np.float64).mean(axis=0), np.maximum(y_train.astype(np.float64).std(axis=0), MIN_TARGET_STD)
-    return (float(mean[0]), float(mean[1])), (float(std[0]), float(std[1]))
+    y = y_train.astype(np.float64)
+    mean, std = y.mean(axis=0), np.maximum(y.std(axis=0), MIN_TARGET_STD)
+    lo, hi = y.min(axis=0) - WORKSPACE_MARGIN, y.max(axis=0) + WORKSPACE_MARGIN
+    return tuple((float(v[0]), float(v[1])) for v in (mean, std, lo, hi))
 
 
 def standardise(y: np.ndarray, target_stats) -> np.ndarray:
     """Positions (N, 2) m as the network regresses them (`target_statistics`); y itself without stats."""
     if target_stats is None:
         return y
-    mean, std = np.asarray(target_stats, np.float32)
+    mean, std = np.asarray(target_stats[:2], np.float32)
     return ((y - mean) / std).astype(np.float32)
 
 
+def _bounded(z, lo, hi, tanh):
+    """z squashed into (lo, hi): the identity's slope at the box's middle, flat towards its walls."""
+    mid, half = (hi + lo) / 2, (hi - lo) / 2
+    return mid + half * tanh((z - mid) / half)
+
+
+def standardised_box(target_stats) -> tuple[np.ndarray, np.ndarray] | None:
+    """The bounded head's (lo, hi) (2,) each in standardised units; None without a box."""
+    if target_stats is None or len(target_stats) < 4:
+        return None
+    mean, std, lo, hi = np.asarray(target_stats, np.float32)
+    return (lo - mean) / std, (hi - mean) / std
+
+
+def position_head(target_stats) -> Callable[[torch.Tensor], torch.Tensor] | None:
+    """The bounded head that a clean location network's outputs (N, 2) pass
+    through in training: each standardised coordinate squashed by a tanh into
+    its box (`target_statistics`), so that no input, however unlike the
+    training ones, moves a prediction out of the training positions' box and
+    its margin. None for other cells."""
+    box = standardised_box(target_stats)
+    if box is None:
+        return None
+    lo, hi = (torch.from_numpy(b) for b in box)
+    return lambda out: _bounded(out, lo.to(out.device), hi.to(out.device), torch.tanh)
+
+
 def to_metres(out: np.ndarray, target_stats) -> np.ndarray:
-    """A network's outputs (N, C) as metres or logits: standardised positions mapped back; else unchanged."""
+    """A network's outputs (N, C) as metres or logits: standardised positions
+    through the bounded head (where the stats hold a box) mapped back; else unchanged."""
     if target_stats is None:
         return out
-    mean, std = np.asarray(target_stats, np.float32)
+    mean, std = np.asarray(target_stats[:2], np.float32)
+    box = standardised_box(target_stats)
+    if box is not None:
+        out = _bounded(out, *box, np.tanh)
     return out * std + mean
 
 
@@ -232,6 +272,7 @@ def fit(
     budget_seconds: float | None = None,
     name: str = "training",
     precision: torch.dtype = torch.float32,
+    head: Callable[[torch.Tensor], torch.Tensor] | None = None,
 ) -> Fitted:
     """The one training loop: train `model` in place on x (N, ...) and y (N,
     ...), tensors on the model's device.
@@ -259,6 +300,9 @@ def fit(
     precision: the dtype of the forward and backward passes
     (`training_precision`); the loss is taken in float32.
 
+    head: applied to the model's outputs before the loss (`position_head`);
+    evaluate_epoch still gets the model's own outputs.
+
     Progress goes to a tqdm bar when stderr is a terminal and to one log line
     per epoch otherwise. The model ends in the selected state."""
     opt = torch.optim.Adam(model.parameters(), lr=hp.lr)
@@ -275,7 +319,8 @@ def fit(
             opt.zero_grad(set_to_none=True)
             with torch.autocast(x.device.type, dtype=precision, enabled=precision != torch.float32):
                 out = model(x[idx])
-            batch_loss = loss(out.float(), y[idx])
+            pred = out.float() if head is None else head(out.float())
+            batch_loss = loss(pred, y[idx])
             batch_loss.backward()
             opt.step()
             total, n_batches = total + batch_loss.detach().cpu(), n_batches + 1
@@ -362,7 +407,8 @@ def run_cell(
         return sign * sel[metric]
 
     name = f"{cell.model} {cell.task} {cell.split} {cell.resolution} {cell.condition} {cell.protocol} seed {cell.seed}"
-    fitted = fit(model, xn[split.train].to(dev), yt[split.train].to(dev), hp, cell.seed, loss_for(cell.task), evaluate_epoch, budget_seconds, name, precision)
+    fitted = fit(model, xn[split.train].to(dev), yt[split.train].to(dev), hp, cell.seed, loss_for(cell.task), evaluate_epoch, budget_seconds, name, precision,
+                 position_head(target_stats))  # fmt: skip
 
     t0 = time.perf_counter()
     test_out = to_metres(infer(model, xn[split.test], dev), target_stats)
