@@ -18,7 +18,7 @@ from denali_pipe.train.training import Hyper, fit, loss_for, run_cell
 
 BINS = 16
 FACTORY = "denali_pipe.train.models:cnn1d"
-# Adam steps every weight by about lr whatever its gradient: at 1e10 the outputs overflow float32 in the first epoch.
+# Adam steps every weight by about lr whatever its gradient: at 1e10 the size classifier's logits overflow float32 by its second epoch.
 DIVERGING = Hyper(lr=1e10, epochs=2, batch_size=16, norm="raw")
 
 
@@ -35,12 +35,13 @@ def data():
 
 
 def cell(seed=7):
-    return Cell(model="cnn1d", task="location", split="random", resolution="3x3", protocol="clean", seed=seed)
+    # a classifier: a clean location cell's bounded head keeps its loss finite however large its outputs
+    return Cell(model="cnn1d", task="size", split="random", resolution="3x3", protocol="clean", seed=seed)
 
 
 def test_a_diverged_cell_fails_naming_the_cell_and_the_epoch(data):
     x, samples = data
-    with pytest.raises(ValueError, match=r"^cnn1d location random 3x3 all clean seed 7: the loss diverged \((nan|inf)\) in epoch 1;"):
+    with pytest.raises(ValueError, match=r"^cnn1d size random 3x3 all clean seed 7: the loss diverged \((nan|inf)\) in epoch 2;"):
         run_cell(x, samples, cell(), DIVERGING, validation_fraction=0.25, factory=FACTORY)
 
 
@@ -78,5 +79,5 @@ def test_denali_train_writes_no_metric_for_a_diverged_cell(tmp_path, data, caplo
     args += ["--hyper", json.dumps(asdict(DIVERGING)), "--validation-fraction", "0.25", "--outdir", str(out)]
     with caplog.at_level(logging.ERROR, logger="denali"):
         assert main(args) == 1
-    assert "cnn1d location random 3x3 all clean seed 7: the loss diverged" in caplog.text and "in epoch 1" in caplog.text
+    assert "cnn1d size random 3x3 all clean seed 7: the loss diverged" in caplog.text and "in epoch 2" in caplog.text
     assert not (tmp_path / "runs").exists()
