@@ -1,8 +1,10 @@
 #!/usr/bin/env python
 """The 1D CNN's three main-table cells trained by the `paper` protocol and by the release's own code, side by side; asserts nothing.
 
+    snakemake --cores all results/datasets/paper/3x3.zarr               # the paper dataset of the tree, whatever train.protocol says
     python scripts/bench_paper_parity.py data/raw                       # the tree the workflow ran on, seeds 42 43 44
     python scripts/bench_paper_parity.py data/raw --epochs 5 --seeds 42 # a quick look: every cell capped at 5 epochs
+    python scripts/bench_paper_parity.py data/raw --tasks shape --seeds 43 --device cuda   # one process per task and seed, as on a GPU
 
 Both sides read the same capture tree. Ours: the workflow's `paper` dataset
 of it (`--dataset`, what rule paper_dataset wrote from the tree's 3x3
