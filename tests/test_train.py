@@ -200,11 +200,15 @@ def test_inference_in_bfloat16_returns_float32_close_to_float32_inference():
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
-def test_a_cell_trains_and_is_recorded_on_the_gpu(data):
+@pytest.mark.parametrize("task", ["size", "location"])  # location: the bounded head's box on the device
+def test_a_cell_trains_and_is_recorded_on_the_gpu(data, task):
     x, samples = data
-    res = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory(), device=training_device(True))
+    res = run_cell(x, samples, _cell(task=task), HP, validation_fraction=0.2, factory=factory(), device=training_device(True))
     assert res.metrics.device.startswith("cuda")
-    assert res.metrics.test["top1"] > 0.8 > res.metrics.baseline["top1"]
+    if task == "size":
+        assert res.metrics.test["top1"] > 0.8 > res.metrics.baseline["top1"]
+    else:
+        assert np.isfinite(res.metrics.test["rmse"]) and len(res.state["target_stats"]) == 4
 
 
 def test_linear_cell_beats_the_baseline(data):
