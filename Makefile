@@ -13,7 +13,8 @@ export PATH := $(abspath $(BIN)):$(PATH)
 
 .PHONY: run test lint explore setup debs
 
-# setup's two parts, the Python install and the Debian packages, run at once.
+# setup's two parts, the Python install and the Debian packages (a fresh
+# machine's apt-get), may run at once.
 MAKEFLAGS += --jobs=2
 
 # The headline target: Table 5 (the 1D CNN under five splits) on the demo preset.

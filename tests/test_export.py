@@ -59,6 +59,8 @@ def test_the_export_predicts_what_the_cell_predicts(tmp_path, data, monkeypatch,
         assert meta["normalisation"]["kind"] == norm and meta["factory"] == factory and meta["cell"]["model"] == model
         assert CropWindow.from_dict(meta["crop"]).crop_start == 104
         assert meta["outputs"] == (["x_m", "y_m"] if task == "location" else "logits over classes")
+        if task == "location":  # a clean location cell: its bounded head's box, applied inside
+            assert meta["targets"]["box_m"] == [list(row) for row in cell.target_stats[2:]]
 
 
 def test_an_export_of_another_kind_is_refused_naming_the_file(tmp_path, data, caplog):  # noqa: F811

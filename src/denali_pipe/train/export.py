@@ -29,7 +29,7 @@ from denali_pipe.core.atomic import atomic_file
 from denali_pipe.preprocess.histograms import CropWindow
 from denali_pipe.train.evaluate import TrainedCell
 from denali_pipe.train.saved_cell import SavedCell
-from denali_pipe.train.training import standardised_box
+from denali_pipe.train.training import bounded, standardised_box
 
 FORMAT = "denali-pipe export"
 VERSION = 2  # 1 was a TorchScript archive, deprecated in torch 2.13
@@ -62,16 +62,15 @@ class NormalisedModel(nn.Module):
         box = standardised_box(target_stats)
         self.bounded = box is not None
         lo, hi = box if box is not None else ((-1.0, -1.0), (1.0, 1.0))
-        # the bounded head as train.training._bounded computes it: mid + half * tanh((out - mid) / half)
-        self.register_buffer("box_mid", (torch.tensor(hi) + torch.tensor(lo)) / 2)
-        self.register_buffer("box_half", (torch.tensor(hi) - torch.tensor(lo)) / 2)
+        self.register_buffer("box_lo", torch.tensor(lo, dtype=torch.float32))
+        self.register_buffer("box_hi", torch.tensor(hi, dtype=torch.float32))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if self.log_z:
             x = (torch.sign(x) * torch.log1p(x.abs()) - self.mu) / self.sigma
         out = self.model(x)
         if self.bounded:
-            out = self.box_mid + self.box_half * torch.tanh((out - self.box_mid) / self.box_half)
+            out = bounded(out, self.box_lo, self.box_hi, torch.tanh)
         if self.to_metres:
             out = out * self.target_std + self.target_mean
         return out

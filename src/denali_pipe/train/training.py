@@ -134,7 +134,7 @@ def standardise(y: np.ndarray, target_stats) -> np.ndarray:
     return ((y - mean) / std).astype(np.float32)
 
 
-def _bounded(z, lo, hi, tanh):
+def bounded(z, lo, hi, tanh):
     """z squashed into (lo, hi): the identity's slope at the box's middle, flat towards its walls."""
     mid, half = (hi + lo) / 2, (hi - lo) / 2
     return mid + half * tanh((z - mid) / half)
@@ -158,7 +158,7 @@ def position_head(target_stats) -> Callable[[torch.Tensor], torch.Tensor] | None
     if box is None:
         return None
     lo, hi = (torch.from_numpy(b) for b in box)
-    return lambda out: _bounded(out, lo.to(out.device), hi.to(out.device), torch.tanh)
+    return lambda out: bounded(out, lo.to(out.device), hi.to(out.device), torch.tanh)
 
 
 def to_metres(out: np.ndarray, target_stats) -> np.ndarray:
@@ -169,7 +169,7 @@ def to_metres(out: np.ndarray, target_stats) -> np.ndarray:
     mean, std = np.asarray(target_stats[:2], np.float32)
     box = standardised_box(target_stats)
     if box is not None:
-        out = _bounded(out, *box, np.tanh)
+        out = bounded(out, *box, np.tanh)
     return out * std + mean
 
 
