@@ -96,8 +96,9 @@ def main() -> None:
         r_view, s_view, zones = fig9.panel_view(real, sim, panel)
         x_test = r_view[split.test].reshape(-1, *r_view.shape[2:])
         r_train = r_view[split.train].reshape(-1, *r_view.shape[2:])
-        x_sim, y_sim = fig9.sim_samples(s_view[split.train], zones, y_train, zt, "noisy", f9["sim_copies"], SEED, crop)
-        x_sim_test, y_sim_test = fig9.sim_samples(s_view[split.test], zones, xy[split.test], zt, "noisy", 1, SEED + 1, crop)
+        kept = (r_train != 0).any(axis=0)
+        x_sim, y_sim = fig9.sim_samples(s_view[split.train], zones, y_train, zt, "noisy", f9["sim_copies"], SEED, crop, kept)
+        x_sim_test, y_sim_test = fig9.sim_samples(s_view[split.test], zones, xy[split.test], zt, "noisy", 1, SEED + 1, crop, kept)
         model, stats = fig9.train_localiser(x_sim, y_sim, hp, SEED, torch.float32)
         box = fig9.workspace(y_sim)
         cnn = {

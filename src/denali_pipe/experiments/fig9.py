@@ -75,11 +75,14 @@ def panel_view(real: np.ndarray, sim: np.ndarray, panel: str) -> tuple[np.ndarra
 
 
 def sim_samples(
-    sim: np.ndarray, zones: np.ndarray, y: np.ndarray, zt: ZoneTransforms, fidelity: str, copies: int, seed: int, crop: tuple[int, int]
+    sim: np.ndarray, zones: np.ndarray, y: np.ndarray, zt: ZoneTransforms, fidelity: str, copies: int, seed: int, crop: tuple[int, int], kept: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Simulated training samples: each twin sim (C, Z, N_BINS) of zones
     `zones` (Z,) `copies` times at `fidelity`, in the real bins crop
-    (start, T). Deterministic fidelities repeat the same histogram; the noisy
+    (start, T), zero outside `kept` (n, n, T), the bins the real captures of
+    those zones hold (the preprocessing zeroes a later-starting zone's bins
+    before its start; a twin's noise and floor offset there would be a cue no
+    capture has). Deterministic fidelities repeat the same histogram; the noisy
     one draws fresh noise per copy, so every fidelity trains on the same
     number of samples. Returns x (copies C, n, n, T) float32, y (copies C, 2) metres."""
     rng = rng_for(seed, "fig9", "noise")
@@ -87,7 +90,7 @@ def sim_samples(
     n = int(round(np.sqrt(Z)))
     zone = np.tile(zones, C)
     flat = sim.reshape(C * Z, -1)
-    x = [zt.apply(flat, zone, fidelity, rng)[:, crop[0] : crop[0] + crop[1]].reshape(C, n, n, crop[1]) for _ in range(copies)]
+    x = [zt.apply(flat, zone, fidelity, rng)[:, crop[0] : crop[0] + crop[1]].reshape(C, n, n, crop[1]) * kept for _ in range(copies)]
     return np.concatenate(x), np.tile(y, (copies, 1))
 
 
@@ -216,6 +219,7 @@ def run_fig9(
         r_view, s_view, zones = panel_view(real, sim, panel)
         r_train, s_train = r_view[split.train], s_view[split.train]
         x_test = r_view[split.test].reshape(-1, *r_view.shape[2:])
+        kept = (r_train != 0).any(axis=(0, 1))
         for seed in f9["seeds"]:
             model_seed = derive_seed(seed, "fig9", "model") % 2**31
             common = {"panel": panel, "seed": seed, "n_test": len(x_test)}
@@ -226,7 +230,7 @@ def run_fig9(
                     m = score(x_real, y_real, x_test, y_test, control_hyper(hp, n_sim, n_real), model_seed, precision)
                     rows.append({**common, "fidelity": CONTROL, "n_real": n_real, CAPPED: _asked(asked), "n_sim": 0, **m})
             for fidelity in FIDELITIES:
-                x_sim, y_sim = sim_samples(s_train, zones, y_train, zt, fidelity, f9["sim_copies"], seed, crop)
+                x_sim, y_sim = sim_samples(s_train, zones, y_train, zt, fidelity, f9["sim_copies"], seed, crop, kept)
                 for n_real, asked in counts:
                     x_real, y_real, _ = real_samples(r_train, y_train, n_real, seed)
                     m = score(np.concatenate([x_sim, x_real]), np.concatenate([y_sim, y_real]), x_test, y_test, hp, model_seed, precision)

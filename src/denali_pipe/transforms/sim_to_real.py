@@ -11,12 +11,19 @@ histograms of the training captures (`fit_transforms`) and applied in order:
    kernel k (non-negative, summing to one), centred ('same' length, zero
    padding): k[HALF + d] weighs a delay of d bins, so it models both the
    pulse shape and the twin's offset of a few bins;
-3. noise: tau_noise = mu + (Poisson(mu+) - mu+) + N(0, (a_noise - 1) mu+ + b_noise)
-   with mu = tau_blur and mu+ = max(mu, 0): the total variance is
-   a_noise mu+ + b_noise (counts^2) and its mean is mu. a_noise >= 1 keeps it
-   at least the Poisson variance of the signal; b_noise >= 0 is the flat
-   floor's shot noise (and read noise), which background subtraction removes
-   from the mean but not from the variance.
+3. noise: tau_noise = mu + (Poisson(mu+) - mu+) + N(0, (a_noise - 1) mu+ + b_noise) + o
+   with mu = tau_blur and mu+ = max(mu, 0): the variance between repeats is
+   a_noise mu+ + b_noise (counts^2). a_noise >= 1 keeps it at least the
+   Poisson variance of the signal; b_noise >= 0 is the flat floor's shot
+   noise (and read noise), which background subtraction removes from the
+   mean but not from the variance. o ~ N(offset_mean, offset_sd^2) is one
+   draw per histogram, the same in every bin (the paper's noise has no such
+   term): a capture's floor against the background subtracted from it. The
+   room light and the dark level drift between the two captures, and every
+   repeat of a capture shares the drift, so the repeats' variance cannot see
+   it; across captures it is the largest part of a dim zone's signal (the
+   demo's edge zones: sd ~35 counts per bin against an object return of
+   10-20, docs/twin.md).
 
 The transforms act on the twin's full 128-bin axis; the fit compares their
 output with the real histogram in its cropped bins (`crop_start` onwards), so
@@ -39,7 +46,7 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -73,6 +80,9 @@ NOISE_PASSES = 2
 VARIANCE_FLOOR = 1e-12
 # The parameters with one value each (as `Transforms` names them); the kernel is the other.
 SCALARS = ("a", "gamma", "a_noise", "b_noise")
+# The floor offset's: bootstrapped beside SCALARS, but not judged by their
+# standard error against their value, as 0 (no offset) is a value they take.
+OFFSET = ("offset_mean", "offset_sd")
 
 
 @dataclass(frozen=True)
@@ -184,13 +194,17 @@ def build_pairs(feature_paths: list[Path], twin_paths: list[Path]) -> Pairs:
 @dataclass(frozen=True)
 class Transforms:
     """Fitted parameters: a (counts / radiance**gamma), gamma, kernel
-    (KERNEL_BINS,) summing to one, a_noise (>= 1), b_noise (counts^2, >= 0)."""
+    (KERNEL_BINS,) summing to one, a_noise (>= 1), b_noise (counts^2, >= 0),
+    and the capture-level floor offset's mean and sd (counts; 0 and 0 in a
+    file written before the offset was fitted, which then adds none)."""
 
     a: float
     gamma: float
     kernel: tuple[float, ...]
     a_noise: float
     b_noise: float
+    offset_mean: float = 0.0
+    offset_sd: float = 0.0
 
     def to_dict(self) -> dict:
         return {**asdict(self), "kernel": list(self.kernel)}
@@ -212,14 +226,16 @@ def blur(h: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return out.reshape(h.shape).astype(np.float32)
 
 
-def add_noise(mu: np.ndarray, a_noise: float, b_noise: float, rng: np.random.Generator) -> np.ndarray:
-    """One Poisson-Gaussian draw around mean `mu` (counts): mean mu,
-    variance a_noise * max(mu, 0) + b_noise."""
+def add_noise(mu: np.ndarray, t: Transforms, rng: np.random.Generator) -> np.ndarray:
+    """One draw of the noise around mean `mu` (..., B) counts: per bin
+    Poisson-Gaussian of variance a_noise * max(mu, 0) + b_noise, plus one
+    floor offset per histogram (N(offset_mean, offset_sd^2), every bin)."""
     mu = np.asarray(mu, np.float64)
     pos = np.maximum(mu, 0.0)
     poisson = rng.poisson(pos) - pos
-    gauss = rng.normal(0.0, 1.0, mu.shape) * np.sqrt((a_noise - 1.0) * pos + b_noise)
-    return (mu + poisson + gauss).astype(np.float32)
+    gauss = rng.normal(0.0, 1.0, mu.shape) * np.sqrt((t.a_noise - 1.0) * pos + t.b_noise)
+    offset = rng.normal(t.offset_mean, t.offset_sd, (*mu.shape[:-1], 1))
+    return (mu + poisson + gauss + offset).astype(np.float32)
 
 
 def apply(sim: np.ndarray, t: Transforms, fidelity: str, rng: np.random.Generator | None = None) -> np.ndarray:
@@ -238,7 +254,7 @@ def apply(sim: np.ndarray, t: Transforms, fidelity: str, rng: np.random.Generato
         return h
     if rng is None:
         raise ValueError("the noisy fidelity needs a random generator")
-    return add_noise(h, t.a_noise, t.b_noise, rng)
+    return add_noise(h, t, rng)
 
 
 # --- the fit ----------------------------------------------------------------------------
@@ -307,7 +323,8 @@ def fit_mean(real_mean: np.ndarray, weights: np.ndarray, sim: np.ndarray, crop_s
     (a fit of log masses over the bins near the twin's peak lost tens of % of
     a below a peak SNR of about 1). gamma is 1 when the twins hold one level
     (`one_level`). ValueError when the best c is 0: no scaled twin correlates
-    with the real counts."""
+    with the real counts. The captures' floor offsets are taken out before
+    (`floor_offsets`)."""
     T = real_mean.shape[1]
     window = twin_window(sim, crop_start, T)
     s_ref = window.max()
@@ -401,6 +418,8 @@ def fit_transforms(pairs: Pairs) -> Transforms:
         raise ValueError("fit_transforms: no pairs to fit on")
     _check_repeats(pairs.real, "fit_transforms")
     repeats = pairs.real.shape[1]
+    offsets, n_free = floor_offsets(pairs.real.mean(axis=1, dtype=np.float64), pairs.sim, pairs.crop_start)
+    pairs = replace(pairs, real=pairs.real - np.float32(common_offset(offsets[n_free > 0])) * kept_bins(pairs.real.mean(axis=1))[:, None, :])
     real_mean = pairs.real.mean(axis=1, dtype=np.float64)
     a, gamma, kernel = fit_mean(real_mean, np.ones_like(real_mean), pairs.sim, pairs.crop_start)
     for _ in range(FIT_PASSES):
@@ -408,7 +427,57 @@ def fit_transforms(pairs: Pairs) -> Transforms:
         weights = repeats / noise_variance(mu, *fit_noise(pairs.real, mu))
         a, gamma, kernel = fit_mean(real_mean, weights, pairs.sim, pairs.crop_start)
     a_noise, b_noise = fit_noise(pairs.real, model_mean(pairs, a, gamma, kernel))
-    return Transforms(a, gamma, tuple(float(k) for k in kernel), a_noise, b_noise)
+    free = n_free > 0
+    if free.sum() < 2:
+        return Transforms(a, gamma, tuple(float(k) for k in kernel), a_noise, b_noise)
+    # a capture's offset is its mean over its twin-free bins, whose noise (b_noise per repeat) is taken out of their spread
+    o, noise = offsets[free], b_noise / repeats / n_free[free]
+    return Transforms(a, gamma, tuple(float(k) for k in kernel), a_noise, b_noise, float(o.mean()), float(np.sqrt(max(o.var(ddof=1) - noise.mean(), 0.0))))
+
+
+def kept_bins(real_mean: np.ndarray) -> np.ndarray:
+    """(N, T) bool: the bins the preprocessing kept in each row of repeat
+    means (N, T). It zeroes a later-starting zone's bins before its start
+    (`preprocess.histograms`), and a background-subtracted mean is never
+    exactly 0 otherwise."""
+    return real_mean != 0
+
+
+# The captures' common floor offset is taken out of the mean fit when it lies
+# this many standard errors from 0. A shift within the noise moved the scale
+# of low-SNR twins by 3 % (tests/test_transforms.py's recovery: -0.2 counts
+# over 362 captures), one of -15 counts left in tripled it.
+OFFSET_SIGNIFICANCE = 3.0
+
+
+def common_offset(offsets: np.ndarray) -> float:
+    """The mean of the captures' floor offsets (counts) where it is
+    significant (`OFFSET_SIGNIFICANCE`), else 0: what the mean fit takes
+    out of the real counts, as no twin holds it. Their spread stays in them:
+    taken out capture by capture, each estimate's own noise moved the
+    scale as much."""
+    if len(offsets) < 2:
+        return 0.0
+    mean, se = float(offsets.mean()), float(offsets.std(ddof=1) / np.sqrt(len(offsets)))
+    return mean if abs(mean) > OFFSET_SIGNIFICANCE * se else 0.0
+
+
+def floor_offsets(real_mean: np.ndarray, sim: np.ndarray, crop_start: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each capture's floor offset (N,) counts and the bins it was read
+    from (N,): its repeat mean (N, T) averaged over its twin-free bins, the
+    kept bins (`kept_bins`) that no part of its twin sim (N, N_BINS) reaches
+    through the blur (the first bins after the direct return's end and the
+    last, on the demo). There the twin predicts nothing, so whatever the
+    capture holds is its floor against the background's. Rows without such
+    a bin get the mean of the others' (0 when no row has one)."""
+    kept = kept_bins(real_mean)
+    window = reach(np.maximum(sim.astype(np.float64), 0.0), crop_start, real_mean.shape[1])
+    near = shifted_copies(window, real_mean.shape[1]).max(axis=-1) > 0
+    free = kept & ~near
+    n = free.sum(axis=1)
+    offsets = np.where(free, real_mean, 0.0).sum(axis=1) / np.maximum(n, 1)
+    fill = offsets[n > 0].mean() if (n > 0).any() else 0.0
+    return np.where(n > 0, offsets, fill), n
 
 
 # --- how far a fit can be trusted -------------------------------------------------------
@@ -419,7 +488,7 @@ class Bootstrap:
     """The fit's spread over `resamples` refits, each on as many captures
     drawn with replacement (a capture's repeats stay together), drawn from
     `seed`. se: the standard error (sd over the refits, ddof 1) of each of
-    SCALARS (a float) and of each kernel tap ("kernel": a list);
+    SCALARS and OFFSET (a float) and of each kernel tap ("kernel": a list);
     interval: the percentile interval of coverage `level`, [low, high] per
     parameter (per tap for the kernel); kernel_l1: the mean L1 distance of
     the refits' kernels from the fitted kernel; failed: the refits that found
@@ -485,7 +554,7 @@ def bootstrap(pairs: Pairs, t: Transforms, resamples: int, seed: int, level: flo
             continue
     if len(fits) < 2:
         raise ValueError(f"bootstrap: {resamples - len(fits)} of {resamples} refits found no positive scale; the captures do not identify the transforms")
-    values = {p: np.array([getattr(f, p) for f in fits]) for p in (*SCALARS, "kernel")}
+    values = {p: np.array([getattr(f, p) for f in fits]) for p in (*SCALARS, *OFFSET, "kernel")}
     tails = (50 * (1 - level), 50 * (1 + level))  # percentiles
     return Bootstrap(
         resamples,
@@ -630,10 +699,13 @@ def write_transforms(path: Path, zt: ZoneTransforms, checks: list[FitCheck], rec
 
 def _transforms(d: dict, path: Path) -> Transforms:
     try:
-        t = Transforms(float(d["a"]), float(d["gamma"]), tuple(float(k) for k in d["kernel"]), float(d["a_noise"]), float(d["b_noise"]))
+        t = Transforms(
+            float(d["a"]), float(d["gamma"]), tuple(float(k) for k in d["kernel"]), float(d["a_noise"]), float(d["b_noise"]),
+            float(d.get("offset_mean", 0.0)), float(d.get("offset_sd", 0.0)),
+        )  # fmt: skip
     except (KeyError, TypeError, ValueError) as e:
         raise ValueError(f"{path}: not a transforms file ({type(e).__name__}: {e})") from None
-    if len(t.kernel) != KERNEL_BINS or not (t.a > 0 and t.gamma > 0 and t.a_noise >= 1 and t.b_noise >= 0):
+    if len(t.kernel) != KERNEL_BINS or not (t.a > 0 and t.gamma > 0 and t.a_noise >= 1 and t.b_noise >= 0 and t.offset_sd >= 0):
         raise ValueError(f"{path}: parameters out of range: {t.to_dict()}")
     return t
 
