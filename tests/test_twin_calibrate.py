@@ -99,8 +99,36 @@ def test_held_out_residual_falls_in_every_zone(fitted):
     result, _, held = fitted
     before, after = np.array(result.before["nl2"]), np.array(result.after["nl2"])
     assert (after < before).all() and (after < 0.2).all()
-    # as close as the noise allows: held-out chi2 per zone near 1
+    # as close as the noise allows: held-out chi2 per zone near 1, nl2 at the noise's own
     assert (np.array(result.after["chi2"]) < 1.5).all()
+    noise = np.array(result.after["nl2_noise"])
+    assert (noise > 0).all() and (after < 1.5 * noise).all()
+
+
+def test_the_captures_floor_offsets_come_out_before_the_fit(cal, planted):
+    """Each capture's zones shifted by their own constant (the room light
+    against the background's: sd 5 % of the brightest bin here) over their
+    kept bins, and a later-starting zone's first bins zeroed as the
+    preprocessing leaves them: the offsets are read from the bins before the
+    return (their noise shrunk away) and taken out, the zeroed bins stay 0;
+    without offsets nothing is taken out."""
+    truth, captures, specs = planted
+    rng = np.random.default_rng(3)
+    n = len(captures.real)
+    offsets = rng.normal(0.0, 0.05 * float(captures.real.max()), (n, 3, 3))
+    real = captures.real + offsets[:, None, :, :, None].astype(np.float32)
+    real[..., 0, 0, :2] = 0.0
+    shifted = C.Captures(real, captures.keys, captures.crop_start)
+    problem = C.Problem(C.Model(cal, specs, captures.keys, SETTINGS), shifted, SETTINGS)
+    problem.take_floor_offsets(truth)
+    # zone by zone (a zone's mean offset over these few captures is within the noise of 0, so it stays: `common_offset`)
+    got, want = problem.offsets.reshape(n, 9), offsets.reshape(n, 9)
+    assert all(np.corrcoef(got[:, z], want[:, z])[0, 1] > 0.99 for z in range(9))
+    assert (problem.y[:, 0, :2] == 0).all() and problem.kept[0, 0, :2].sum() == 0
+    clean = C.Problem(C.Model(cal, specs, captures.keys, SETTINGS), captures, SETTINGS)
+    y = clean.y.copy()
+    clean.take_floor_offsets(truth)
+    assert np.array_equal(clean.y, y) and not clean.offsets.any()
 
 
 def test_the_fit_never_sees_held_out_captures(planted, fitted):

@@ -32,12 +32,12 @@ def plot_calibration(result: Result, held: Problem, out_png: Path) -> None:
     rows = []
     for z, ax in enumerate(axes.ravel()):
         r, c = divmod(z, GRID)
-        ax.plot(bins, held.y[i, z], color="0.3", lw=0.8, label="real (bg-subtracted, repeat mean)")
+        ax.plot(bins, held.y[i, z], color="0.3", lw=0.8, label="real (bg-subtracted, its floor offset out, repeat mean)")
         ax.plot(bins, before[z], color="tab:orange", lw=1.2, ls="--", label="twin before calibration")
         ax.plot(bins, after[z], color="tab:blue", lw=1.4, label="twin after calibration")
         ax.axhline(0, color="k", lw=0.5)
-        nb, na = result.before["nl2"][r][c], result.after["nl2"][r][c]
-        ax.set_title(f"zone ({r}, {c}): held-out residual {nb:.2f} -> {na:.2f}", fontsize=8)
+        nb, na, nn = result.before["nl2"][r][c], result.after["nl2"][r][c], result.after["nl2_noise"][r][c]
+        ax.set_title(f"zone ({r}, {c}): held-out residual {nb:.2f} -> {na:.2f} (noise alone {nn:.2f})", fontsize=8)
         ax.tick_params(labelsize=7)
         if c == 0:
             ax.set_ylabel("counts", fontsize=8)
@@ -46,5 +46,9 @@ def plot_calibration(result: Result, held: Problem, out_png: Path) -> None:
         rows.append(pd.DataFrame({"zone_row": r, "zone_col": c, "bin": bins, "real": held.y[i, z], "before": before[z], "after": after[z]}))
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=8, frameon=False)
-    fig.suptitle("Twin against a held-out real capture, per zone (residual: ||real - twin|| / ||real|| over the held-out captures)", fontsize=9)
+    fig.suptitle(
+        "Twin against a held-out real capture, per zone (residual: ||real - twin|| / ||real|| over the held-out captures;"
+        " noise alone: what a twin exact to the photon would leave)",
+        fontsize=9,
+    )
     save_figure(fig, out_png, pd.concat(rows, ignore_index=True))

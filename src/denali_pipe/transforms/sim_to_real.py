@@ -55,6 +55,7 @@ from scipy.optimize import minimize_scalar, nnls
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.atomic import atomic_file
+from denali_pipe.core.floor import common_offset, offset_spread
 from denali_pipe.io.features import read_features
 from denali_pipe.train.splits import Split, held_out_groups
 from denali_pipe.twin.render import read_twin
@@ -432,7 +433,7 @@ def fit_transforms(pairs: Pairs) -> Transforms:
         return Transforms(a, gamma, tuple(float(k) for k in kernel), a_noise, b_noise)
     # a capture's offset is its mean over its twin-free bins, whose noise (b_noise per repeat) is taken out of their spread
     o, noise = offsets[free], b_noise / repeats / n_free[free]
-    return Transforms(a, gamma, tuple(float(k) for k in kernel), a_noise, b_noise, float(o.mean()), float(np.sqrt(max(o.var(ddof=1) - noise.mean(), 0.0))))
+    return Transforms(a, gamma, tuple(float(k) for k in kernel), a_noise, b_noise, float(o.mean()), float(np.sqrt(offset_spread(o, noise))))
 
 
 def kept_bins(real_mean: np.ndarray) -> np.ndarray:
@@ -441,25 +442,6 @@ def kept_bins(real_mean: np.ndarray) -> np.ndarray:
     (`preprocess.histograms`), and a background-subtracted mean is never
     exactly 0 otherwise."""
     return real_mean != 0
-
-
-# The captures' common floor offset is taken out of the mean fit when it lies
-# this many standard errors from 0. A shift within the noise moved the scale
-# of low-SNR twins by 3 % (tests/test_transforms.py's recovery: -0.2 counts
-# over 362 captures), one of -15 counts left in tripled it.
-OFFSET_SIGNIFICANCE = 3.0
-
-
-def common_offset(offsets: np.ndarray) -> float:
-    """The mean of the captures' floor offsets (counts) where it is
-    significant (`OFFSET_SIGNIFICANCE`), else 0: what the mean fit takes
-    out of the real counts, as no twin holds it. Their spread stays in them:
-    taken out capture by capture, each estimate's own noise moved the
-    scale as much."""
-    if len(offsets) < 2:
-        return 0.0
-    mean, se = float(offsets.mean()), float(offsets.std(ddof=1) / np.sqrt(len(offsets)))
-    return mean if abs(mean) > OFFSET_SIGNIFICANCE * se else 0.0
 
 
 def floor_offsets(real_mean: np.ndarray, sim: np.ndarray, crop_start: int) -> tuple[np.ndarray, np.ndarray]:

@@ -30,11 +30,13 @@ within a bin or two and decays over many; a symmetric pulse cannot follow a
 bump of that shape, and the geometry then bends to make up for it. The data
 are the background-subtracted 3x3 light-on captures of the training split
 (`transforms.split_pairs`: the Fig 9 test captures are never read), mean
-over repeats, each zone weighted by its noise (the repeats' pooled
-variance of the mean). A share `validation_fraction` of the training
-captures is held out of the fit: each zone's residual on them before
-(the design twin, with its gains and pulse fitted) and after calibration
-says what the fit bought. Uncertainties: a bootstrap over captures drawn
+over repeats, each capture's floor offset taken out (`core.floor`,
+`Problem.take_floor_offsets`), each zone weighted by its noise (the
+repeats' pooled variance of the mean over the bins it keeps). A share
+`validation_fraction` of the training captures is held out of the fit:
+each zone's residual on them before (the design twin, with its gains and
+pulse fitted) and after calibration says what the fit bought, beside the
+residual the noise alone leaves (`zone_residuals`). Uncertainties: a bootstrap over captures drawn
 with replacement, as transforms.json's, each resample's refit linearised
 about the fit (`linearised_bootstrap`), its intervals holding the estimate
 and the coordinates the captures do not pin down named (`uncertainty`).
@@ -59,6 +61,7 @@ from scipy.optimize import least_squares
 from denali_pipe.core import geometry as geo
 from denali_pipe.core import pulse
 from denali_pipe.core.atomic import atomic_file
+from denali_pipe.core.floor import common_offset, offset_spread
 from denali_pipe.core.meshes import object_mesh
 from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.core.pulse import Pulse
@@ -255,6 +258,14 @@ def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, 
 # coordinate's range is 0.23 % of a scale, 0.02 cm of an offset and 0.04
 # bins of the time offset: no physical difference from the bound.
 BOUND_TOLERANCE = 1e-3
+# A bin is dark to the twins where they render less than this share of the
+# zone's peak (over its captures): there the captures hold their floor offset
+# and noise only (`Problem.take_floor_offsets`).
+TWIN_FREE_SHARE = 1e-3
+# Bins kept clear of the twins' onset: the fit's time offset and the pulse's
+# rise may move the return earlier than the twins at the fit's start show it
+# (the demo's time offset: -0.13 bins).
+DARK_MARGIN_BINS = 3
 # A coordinate whose bootstrap interval spans more than this share of its
 # range is not identified: the captures narrow it less than 4x from what the
 # bounds allow (a scale's 90 % interval over 1.8x, a width's over 2.3x, an
@@ -284,9 +295,54 @@ class Problem:
         R = captures.real.shape[1]
         real = captures.real.reshape(len(captures.real), R, ZONES, self.T).astype(np.float64)
         self.y = real.mean(axis=1)
-        self.sigma = np.sqrt(real.var(axis=1, ddof=1).mean(axis=(0, 2)) / R) if R > 1 else self.y.std(axis=(0, 2))
+        # (1, Z, T): the bins each zone keeps, as its captures show them: the
+        # preprocessing zeroes a later-starting zone's bins before its start
+        # (a zone of all-zero captures, as the twins' own renders start from, keeps every bin)
+        kept = (self.y != 0).any(axis=0)
+        self.kept = (kept | ~kept.any(axis=1, keepdims=True))[None]
+        n_kept = len(self.y) * self.kept.sum(axis=(0, 2))
+        if R > 1:
+            self.sigma = np.sqrt((real.var(axis=1, ddof=1) * self.kept).sum(axis=(0, 2)) / n_kept / R)
+        else:
+            self.sigma = np.sqrt((self.y**2 * self.kept).sum(axis=(0, 2)) / n_kept)
         self.sigma = np.maximum(self.sigma, 1e-9)
+        self.offsets = np.zeros(self.y.shape[:2])
         self.cache: dict = {}
+
+    def take_floor_offsets(self, x: np.ndarray) -> None:
+        """Take each capture's floor offset out of its zones' means: the mean
+        of its kept bins before the object's return can reach them (the twins
+        at x below `TWIN_FREE_SHARE` of the zone's peak over the captures,
+        less `DARK_MARGIN_BINS`; not the late bins, which the pulse's tail
+        the fit is yet to find may reach). A capture's
+        room light and dark level drift from its background's, the same in
+        every repeat and bin (transforms.sim_to_real: the demo's dim zones
+        hold offsets of sd ~35 counts against an object return of 10-20),
+        which no twin renders. Each capture's reading holds the noise of its
+        few dark bins, so it is shrunk toward the zone's mean by the share of
+        their spread that is the offsets' own (tau^2 / (tau^2 + s_i^2),
+        `core.floor.offset_spread`: no offsets, no change), and the zone's
+        mean is taken out only where it stands 3 standard errors from 0
+        (`core.floor.common_offset`);
+        captures without a dark kept bin get that mean."""
+        m = self.twins(x)
+        lit = m >= TWIN_FREE_SHARE * m.max(axis=(0, 2), keepdims=True)
+        onset = np.where(lit.any(axis=2), lit.argmax(axis=2), self.T)
+        free = self.kept & (np.arange(self.T) < onset[..., None] - DARK_MARGIN_BINS)
+        n = free.sum(axis=2)
+        self.offsets = np.zeros(n.shape)
+        for z in range(ZONES):
+            has = n[:, z] > 0
+            if has.sum() < 2:
+                continue
+            o = np.where(free[:, z], self.y[:, z], 0.0).sum(axis=1)[has] / n[has, z]
+            s2 = self.sigma[z] ** 2 / n[has, z]
+            tau2 = offset_spread(o, s2)
+            mean = common_offset(o)
+            self.offsets[:, z] = mean
+            self.offsets[has, z] = mean + (o - o.mean()) * tau2 / (tau2 + s2)
+        self.y = self.y - self.offsets[..., None] * self.kept
+        self.cache.clear()
 
     def zone_twin(self, z: int, zones: ZoneGeometry, material: Material, hwhm_deg) -> np.ndarray:
         key = (z, *zones.offsets[divmod(z, GRID)].round(12), round(float(zones.scales[divmod(z, GRID)]), 12), material, hwhm_deg)
@@ -297,10 +353,12 @@ class Problem:
         return self.cache[key]
 
     def twins(self, x: np.ndarray) -> np.ndarray:
-        """(N, Z, T) the twins blurred by the pulse, in the real bins (before the gains)."""
+        """(N, Z, T) the twins blurred by the pulse, in the real bins the
+        captures keep (0 in the others, as the preprocessing left the
+        captures), before the gains."""
         zones, t0, p, material, hwhm = _unpack(x, self.settings)
         h = np.stack([self.zone_twin(z, zones, material, hwhm) for z in range(ZONES)], axis=1)
-        return pulse.convolve(h, pulse.kernel(p, t0))[..., self.crop : self.crop + self.T]
+        return pulse.convolve(h, pulse.kernel(p, t0))[..., self.crop : self.crop + self.T] * self.kept
 
     def gains(self, m: np.ndarray) -> np.ndarray:
         """(Z,) least-squares gain of each zone's twins m (N, Z, T) against y,
@@ -377,14 +435,20 @@ def to_physical(x: np.ndarray, settings: dict) -> dict:
 
 
 def zone_residuals(problem: Problem, x: np.ndarray, gains: np.ndarray) -> dict:
-    """Per zone (3, 3): nl2 = ||y - g m|| / ||y|| and chi2 = mean squared
-    noise-weighted residual (1: as close as the noise allows)."""
-    r = problem.residuals(x, gains)
-    fit_m = problem.y - r * problem.sigma[None, :, None]
-    nl2 = np.linalg.norm((problem.y - fit_m).transpose(1, 0, 2).reshape(ZONES, -1), axis=1) / np.linalg.norm(
-        problem.y.transpose(1, 0, 2).reshape(ZONES, -1), axis=1
-    )
-    return {"nl2": nl2.reshape(GRID, GRID).tolist(), "chi2": (r**2).mean(axis=(0, 2)).reshape(GRID, GRID).tolist()}
+    """Per zone (3, 3): nl2 = ||y - g m|| / ||y||; nl2_noise, the nl2 the
+    noise of the repeat means alone leaves (what a twin exact to the last
+    photon would score: sqrt(kept bins) sigma / ||y||, so a zone whose
+    captures hold little object return cannot score below it); and chi2 =
+    mean squared noise-weighted residual over the kept bins (1: as close as
+    the noise allows)."""
+    r = problem.residuals(x, gains)  # 0 in the bins the captures do not keep
+    kept = len(problem.y) * problem.kept[0].sum(axis=1)
+    norm_y = np.linalg.norm(problem.y.transpose(1, 0, 2).reshape(ZONES, -1), axis=1)
+    nl2 = np.linalg.norm((r * problem.sigma[None, :, None]).transpose(1, 0, 2).reshape(ZONES, -1), axis=1) / norm_y
+    noise = np.sqrt(kept) * problem.sigma / norm_y
+    chi2 = (r**2).transpose(1, 0, 2).reshape(ZONES, -1).sum(axis=1) / np.maximum(kept, 1)
+    grid = lambda v: v.reshape(GRID, GRID).tolist()  # noqa: E731
+    return {"nl2": grid(nl2), "nl2_noise": grid(noise), "chi2": grid(chi2)}
 
 
 def nuisance_fit(problem: Problem, x: np.ndarray) -> np.ndarray:
@@ -435,6 +499,8 @@ def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict,
     problem = Problem(Model(cal, specs, fit_cap.keys, settings), fit_cap, settings)
     held = Problem(Model(cal, specs, val_cap.keys, settings), val_cap, settings)
     x0 = initial(settings)
+    for p in (problem, held):
+        p.take_floor_offsets(x0)
     x_before = nuisance_fit(problem, x0)
     gains_before = problem.gains(problem.twins(x_before))
     x, fit_record = fit(problem, x_before, c["max_evaluations"])

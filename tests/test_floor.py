@@ -1,0 +1,25 @@
+"""The capture floor offset's statistics: what is taken for an offset and what for noise."""
+
+import numpy as np
+import pytest
+
+from denali_pipe.core.floor import common_offset, offset_spread
+
+
+def test_a_common_offset_within_the_noise_is_not_taken():
+    rng = np.random.default_rng(0)
+    assert common_offset(rng.normal(0.0, 5.0, 400)) == 0.0
+    assert common_offset(np.array([3.0])) == 0.0
+    o = rng.normal(-15.0, 30.0, 400)
+    assert common_offset(o) == pytest.approx(o.mean())
+
+
+def test_a_spread_within_the_noise_is_not_taken_for_offsets():
+    """Readings of noise sd 6 alone leave no offset variance; offsets of sd
+    35 under the same noise come back as their own variance."""
+    rng = np.random.default_rng(1)
+    noise = np.full(400, 36.0)
+    assert offset_spread(rng.normal(0.0, 6.0, 400), noise) == 0.0
+    spread = offset_spread(rng.normal(0.0, 35.0, 400) + rng.normal(0.0, 6.0, 400), noise)
+    assert np.sqrt(spread) == pytest.approx(35.0, rel=0.1)
+    assert offset_spread(np.array([1.0]), np.array([1.0])) == 0.0
