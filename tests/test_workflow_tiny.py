@@ -449,6 +449,8 @@ def test_twin_calibration(tiny_run):
     assert c["illumination"] == "flood"
     before, after = np.array(c["residual"]["before"]["nl2"]), np.array(c["residual"]["after"]["nl2"])
     assert before.shape == after.shape == (3, 3) and after.mean() < before.mean()
+    noise = np.array(c["residual"]["after"]["nl2_noise"])  # what the noise alone leaves: no twin scores far below it
+    assert noise.shape == (3, 3) and (noise > 0).all() and (after > 0.8 * noise).all()
     assert c["n_test_excluded"] > 0 and (tiny_run / "results/twin_calibration.png").stat().st_size > 10_000
     assert 0 < c["fit"]["evaluations"] <= 20  # the tiny preset's budget
     twins = sorted((tiny_run / "results/twin_calibrated").glob("*.zarr"))
@@ -460,7 +462,7 @@ def test_transforms_and_fig9(tiny_run):
     t = json.loads((tiny_run / "results/transforms.json").read_text())
     assert t["mode"] in ("shared", "per_zone") and len(t["zones"]) == 9 and set(t["mode_residual"]) | set(t["mode_rejected"]) == {"shared", "per_zone"}
     for z in t["zones"]:
-        assert z["a"] > 0 and z["a_noise"] >= 1 and z["b_noise"] >= 0
+        assert z["a"] > 0 and z["a_noise"] >= 1 and z["b_noise"] >= 0 and z["offset_sd"] >= 0 and np.isfinite(z["offset_mean"])
         assert len(z["kernel"]) == t["kernel_bins"] == 11 and abs(sum(z["kernel"]) - 1) < 1e-6
     fig9 = pd.read_csv(tiny_run / "results/fig9.csv")
     assert set(fig9["fidelity"]) == {*FIDELITIES, CONTROL, MEAN_BASELINE} and len(FIDELITIES) == 4
