@@ -36,6 +36,7 @@ import torch
 import yaml
 
 from denali_pipe.core.capture_sets import parse_set_name
+from denali_pipe.core.floor import kept_bins
 from denali_pipe.experiments import fig9
 from denali_pipe.train.dataset import location_labels
 from denali_pipe.train.metrics import predict_mean_baseline, regression_metrics
@@ -96,7 +97,7 @@ def main() -> None:
         r_view, s_view, zones = fig9.panel_view(real, sim, panel)
         x_test = r_view[split.test].reshape(-1, *r_view.shape[2:])
         r_train = r_view[split.train].reshape(-1, *r_view.shape[2:])
-        kept = (r_train != 0).any(axis=0)
+        kept = kept_bins(r_train, axis=0)
         x_sim, y_sim = fig9.sim_samples(s_view[split.train], zones, y_train, zt, "noisy", f9["sim_copies"], SEED, crop, kept)
         x_sim_test, y_sim_test = fig9.sim_samples(s_view[split.test], zones, xy[split.test], zt, "noisy", 1, SEED + 1, crop, kept)
         model, stats = fig9.train_localiser(x_sim, y_sim, hp, SEED, torch.float32)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from denali_pipe.core.floor import common_offset, offset_spread
+from denali_pipe.core.floor import common_offset, kept_bins, offset_spread
 
 
 def test_a_common_offset_within_the_noise_is_not_taken():
@@ -23,3 +23,11 @@ def test_a_spread_within_the_noise_is_not_taken_for_offsets():
     spread = offset_spread(rng.normal(0.0, 35.0, 400) + rng.normal(0.0, 6.0, 400), noise)
     assert np.sqrt(spread) == pytest.approx(35.0, rel=0.1)
     assert offset_spread(np.array([1.0]), np.array([1.0])) == 0.0
+
+
+def test_kept_bins_are_those_not_zeroed_in_any_capture():
+    """The preprocessing zeroes a zone's bins before its start in every
+    capture; a kept bin may be 0 in one capture by chance, not in all."""
+    counts = np.array([[0.0, 0.0, 3.0, -1.0], [0.0, 0.0, 0.0, 2.0]])
+    assert kept_bins(counts).tolist() == [[False, False, True, True], [False, False, False, True]]
+    assert kept_bins(counts, axis=0).tolist() == [False, False, True, True]

@@ -14,6 +14,17 @@ from __future__ import annotations
 
 import numpy as np
 
+
+def kept_bins(counts: np.ndarray, axis: int | tuple[int, ...] | None = None) -> np.ndarray:
+    """The bins the preprocessing kept (bool): not exactly 0 in any of
+    `counts` along `axis` (captures, repeats; None: element by element). It
+    zeroes a later-starting zone's bins before its start
+    (`preprocess.histograms`), and a background-subtracted count is never
+    exactly 0 otherwise."""
+    nonzero = np.asarray(counts) != 0
+    return nonzero if axis is None else nonzero.any(axis=axis)
+
+
 # The captures' common offset is taken out only where it lies this many
 # standard errors from 0: a shift within the noise moved the transforms' scale
 # of low-SNR twins by 3 % (tests/test_transforms.py's recovery: -0.2 counts

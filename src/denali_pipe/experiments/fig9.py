@@ -46,6 +46,7 @@ import pandas as pd
 import torch
 from torch import nn
 
+from denali_pipe.core.floor import kept_bins
 from denali_pipe.core.seeds import derive_seed, rng_for
 from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train.metrics import predict_mean_baseline, regression_metrics
@@ -219,7 +220,7 @@ def run_fig9(
         r_view, s_view, zones = panel_view(real, sim, panel)
         r_train, s_train = r_view[split.train], s_view[split.train]
         x_test = r_view[split.test].reshape(-1, *r_view.shape[2:])
-        kept = (r_train != 0).any(axis=(0, 1))
+        kept = kept_bins(r_train, axis=(0, 1))
         for seed in f9["seeds"]:
             model_seed = derive_seed(seed, "fig9", "model") % 2**31
             common = {"panel": panel, "seed": seed, "n_test": len(x_test)}

@@ -55,7 +55,7 @@ from scipy.optimize import minimize_scalar, nnls
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.atomic import atomic_file
-from denali_pipe.core.floor import common_offset, offset_spread
+from denali_pipe.core.floor import common_offset, kept_bins, offset_spread
 from denali_pipe.io.features import read_features
 from denali_pipe.train.splits import Split, held_out_groups
 from denali_pipe.twin.render import read_twin
@@ -419,8 +419,9 @@ def fit_transforms(pairs: Pairs) -> Transforms:
         raise ValueError("fit_transforms: no pairs to fit on")
     _check_repeats(pairs.real, "fit_transforms")
     repeats = pairs.real.shape[1]
-    offsets, n_free = floor_offsets(pairs.real.mean(axis=1, dtype=np.float64), pairs.sim, pairs.crop_start)
-    pairs = replace(pairs, real=pairs.real - np.float32(common_offset(offsets[n_free > 0])) * kept_bins(pairs.real.mean(axis=1))[:, None, :])
+    real_mean = pairs.real.mean(axis=1, dtype=np.float64)
+    offsets, n_free = floor_offsets(real_mean, pairs.sim, pairs.crop_start)
+    pairs = replace(pairs, real=pairs.real - (np.float32(common_offset(offsets[n_free > 0])) * kept_bins(real_mean))[:, None, :])
     real_mean = pairs.real.mean(axis=1, dtype=np.float64)
     a, gamma, kernel = fit_mean(real_mean, np.ones_like(real_mean), pairs.sim, pairs.crop_start)
     for _ in range(FIT_PASSES):
@@ -434,14 +435,6 @@ def fit_transforms(pairs: Pairs) -> Transforms:
     # a capture's offset is its mean over its twin-free bins, whose noise (b_noise per repeat) is taken out of their spread
     o, noise = offsets[free], b_noise / repeats / n_free[free]
     return Transforms(a, gamma, tuple(float(k) for k in kernel), a_noise, b_noise, float(o.mean()), float(np.sqrt(offset_spread(o, noise))))
-
-
-def kept_bins(real_mean: np.ndarray) -> np.ndarray:
-    """(N, T) bool: the bins the preprocessing kept in each row of repeat
-    means (N, T). It zeroes a later-starting zone's bins before its start
-    (`preprocess.histograms`), and a background-subtracted mean is never
-    exactly 0 otherwise."""
-    return real_mean != 0
 
 
 def floor_offsets(real_mean: np.ndarray, sim: np.ndarray, crop_start: int) -> tuple[np.ndarray, np.ndarray]:

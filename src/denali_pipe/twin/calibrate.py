@@ -61,7 +61,7 @@ from scipy.optimize import least_squares
 from denali_pipe.core import geometry as geo
 from denali_pipe.core import pulse
 from denali_pipe.core.atomic import atomic_file
-from denali_pipe.core.floor import common_offset, offset_spread
+from denali_pipe.core.floor import common_offset, kept_bins, offset_spread
 from denali_pipe.core.meshes import object_mesh
 from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.core.pulse import Pulse
@@ -298,7 +298,7 @@ class Problem:
         # (1, Z, T): the bins each zone keeps, as its captures show them: the
         # preprocessing zeroes a later-starting zone's bins before its start
         # (a zone of all-zero captures, as the twins' own renders start from, keeps every bin)
-        kept = (self.y != 0).any(axis=0)
+        kept = kept_bins(self.y, axis=0)
         self.kept = (kept | ~kept.any(axis=1, keepdims=True))[None]
         n_kept = len(self.y) * self.kept.sum(axis=(0, 2))
         if R > 1:
