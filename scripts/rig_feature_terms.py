@@ -14,6 +14,7 @@ Each row changes one term and keeps the rest (the light transport is shared):
 - the floor per zone: dark counts, room light, the laser's slow tail;
 - the direct return's height and width: the flux, the pulse's fast part,
   the combiner's saturation, the SPADs' dead time;
+- the receiver's glare (none);
 - the object's bump (the mount alone);
 - the noise between repeats: none (expected counts), or the campaign's
   nuisances drawn per capture (laser power, room light, clock offset:
@@ -128,6 +129,7 @@ def main() -> None:
         "direct: no saturation": {"phot": change(saturation_counts=1e12)},
         "direct: saturation x2": {"phot": change(saturation_counts=2 * phot.saturation_counts)},
         "direct: no dead time": {"phot": change(dead_time_counts=1e15)},
+        "receiver: no glare": {"phot": change(glare_share=0.0)},
         "bump: no object (mount only)": {"bump": False},
         "repeats: no noise (expected)": {"noise": "none"},
         "repeats: campaign nuisances per capture": {"nuisances": rig["nuisances"]},

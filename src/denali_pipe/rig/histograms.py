@@ -84,6 +84,10 @@ class Photometry:
         receiver's optical axis, degrees toward the sensor's right and up.
     vignetting_power: the receive lens's relative illumination cos^n of the
         field angle (n = 4: natural vignetting of a thin lens).
+    glare_share: the share of the light reaching the receiver that its optics
+        scatter evenly over the SPAD array (veiling glare: stray light of the
+        lens and the cover glass), which every zone then collects in
+        proportion to its SPADs (`glare`).
     """
 
     direct_peak_counts: float
@@ -103,6 +107,7 @@ class Photometry:
     beam_yaw_deg: float
     beam_pitch_deg: float
     vignetting_power: float
+    glare_share: float
 
     @classmethod
     def from_config(cls, d: dict) -> "Photometry":
@@ -348,6 +353,17 @@ def respond(x: np.ndarray, saturation: float, dead: np.ndarray | float) -> np.nd
     return saturation * -np.expm1(-detected / saturation)
 
 
+def glare(light: np.ndarray, share: float, spads: np.ndarray) -> np.ndarray:
+    """What each zone collects (Z, ...) from the light `light` (Z, ...)
+    focused on it, once the receiver's veiling glare has spread `share` of
+    all of it over the SPAD array: every zone takes the part its SPADs
+    `spads` (Z,) hold. A dim zone beside a bright one then holds the bright
+    one's return at the bright one's time: the real far column's early
+    second peak (docs/rig_zones.md, "Glare")."""
+    area = (spads / spads.sum()).reshape((-1,) + (1,) * (light.ndim - 1))
+    return (1.0 - share) * light + share * area * light.sum(axis=0, keepdims=True)
+
+
 def _gain(phot: Photometry) -> float:
     """Counts per unit transport so that the centre 3x3 zone's direct peak is
     `direct_peak_counts` above the floor, before the nonlinearity."""
@@ -356,7 +372,9 @@ def _gain(phot: Photometry) -> float:
 
 @lru_cache(maxsize=None)
 def _direct_peak(phot: Photometry) -> float:
-    h = pulse.convolve(transport(geo.REFERENCE_RESOLUTION, [], phot).hist, pulse_kernel(phot))
+    zone_size, _ = _floor_shares(geo.REFERENCE_RESOLUTION, phot)
+    light = glare(transport(geo.REFERENCE_RESOLUTION, [], phot).hist, phot.glare_share, zone_size)
+    h = pulse.convolve(light, pulse_kernel(phot))
     return float(h[len(h) // 2].max())
 
 
@@ -390,10 +408,13 @@ def counts_from_transport(resolution: str, light_on: bool, light: Transport, pho
     sub = geo.zone_subcapture(resolution)
     power = np.broadcast_to(conditions.power_gain, (fw.subcaptures,))
     shift = np.broadcast_to(conditions.time_shift_bins, (fw.subcaptures,))
-    signal = np.empty_like(light.hist)
+    # glare mixes the light of every zone, whichever subcapture measures it
+    hist = glare(light.hist, phot.glare_share, zone_size)
+    signal = np.empty_like(hist)
     for s in range(fw.subcaptures):
-        signal[sub == s] = power[s] * pulse.convolve(light.hist[sub == s], pulse_kernel(phot, float(shift[s])))
-    floor = phot.dark_counts * zone_size + (phot.ambient_counts * conditions.ambient_gain * room * light.ambient if light_on else 0.0)
+        signal[sub == s] = power[s] * pulse.convolve(hist[sub == s], pulse_kernel(phot, float(shift[s])))
+    room_light = glare(room * light.ambient, phot.glare_share, zone_size)
+    floor = phot.dark_counts * zone_size + (phot.ambient_counts * conditions.ambient_gain * room_light if light_on else 0.0)
     x = iters * (_gain(phot) * signal + floor[:, None])
     # a zone's SPADs (hence its dead-time budget) scale with its solid angle;
     # its combiner's events per cycle do not, only the firmware's cycles

@@ -18,6 +18,10 @@ FLOOR_START = 2
 FLOOR_GAP = 8
 # The late floor: the last LATE_BINS bins (the figures read "by bin 128").
 LATE_BINS = 8
+# A far zone's early return: its counts within EARLY_WINDOW bins of the
+# brightest zone's direct peak, against its own later peak (the real far
+# column's first peak sits there: capture_setup.png's pixels 1, 4 and 7).
+EARLY_WINDOW = 3
 # The three-bounce bump is searched this many bins after the direct peak:
 # the hidden object is at least ~0.25 m from the wall, ~20 bins of path.
 BUMP_AFTER_PEAK = 15
@@ -108,3 +112,22 @@ def matched_filter_snr(signal: np.ndarray, expected: np.ndarray, read_noise: flo
     sqrt(sum_b s_b^2 / var_b), with var_b the Poisson variance plus read
     noise squared (counts^2)."""
     return np.sqrt((np.asarray(signal, float) ** 2 / (np.asarray(expected, float) + read_noise**2)).sum(-1))
+
+
+def early_share(zones: np.ndarray, zone: int) -> float:
+    """A zone's early return over its own direct peak, both above its floor.
+
+    zones: one capture's counts (Z, N_BINS). The early return is the zone's
+    largest count within EARLY_WINDOW bins of the brightest zone's direct
+    peak, its own peak the largest after that window; the floor as
+    `measure` takes it, before the brightest zone's peak. A zone that sees
+    farther wall than the brightest zone holds an early return only by
+    light meant for other zones (the receiver's glare)."""
+    zones = np.asarray(zones, float)
+    first = int(np.argmax(zones.max(axis=1)))
+    at = int(np.argmax(zones[first]))
+    h = zones[zone]
+    floor = h[FLOOR_START : max(at - FLOOR_GAP, FLOOR_START + 1)].mean()
+    early = h[max(at - EARLY_WINDOW, 0) : at + EARLY_WINDOW + 1].max() - floor
+    own = h[at + EARLY_WINDOW + 1 :].max() - floor
+    return float(early / own)
