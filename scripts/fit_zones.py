@@ -11,29 +11,31 @@ fitted (docs/rig_zones.md): least squares on the nine zones' log mean counts
 against REFERENCE Part 5's (a 7 % scale, so a zone 15 % off costs about two),
 with Part 4's centre-zone checks as one-sided penalties that cost nothing
 inside their ranges: (b) the floor 1.2-5 % of the direct peak and the late
-bins at 0.25-0.48 of it, (c) an 8 in square's bump at mid gantry 4-7 % of the peak
-and 1.55-2.2x the floor, the bump of the release's located 8 in "8" at
-location 90 4.2-5.8 bins wide, the pooled log1p mean 7.0-7.2 and spread
+bins at 0.25-0.48 of it, (c) an 8 in square's bump at mid gantry 4-7 % of
+the peak and 1.55-2.2x the floor, the bump of the release's located 8 in "8"
+at location 90 4.2-5.8 bins wide, the pooled log1p mean 7.0-7.2 and spread
 0.70-0.86, and the far column's early return over its own peak
 (`rig.measure.early_share`) 0.45-0.8 in the far corners and 0.05-0.2 beside
-the centre, as `capture_setup.png` shows it. Expected counts, no nuisances; the zone means over 3 locations x
-2 objects (A, square; 8 in) x 2 lightings. The flood keeps the receiver's
-52:41 aspect and the core is round, so 8 parameters: the flood's width, the
-core's share and width, the yaw, the flux, the saturation count, the dark
-floor (room light twice it) and the slow tail's share. The pulse's fast part,
-the slow tail's time constant, the dead time and the vignetting stay as
-configured. A few minutes on one core.
+the centre, as `capture_setup.png` shows it. Expected counts, no nuisances;
+the zone means over 3 locations x 2 objects (A, square; 8 in) x 2
+lightings. The flood keeps the receiver's 52:41 aspect and the core is
+round, so 8 parameters: the flood's width, the core's share and width, the
+yaw, the flux, the saturation count, the dark floor (room light twice it)
+and the slow tail's share. The pulse's fast part, the slow tail's time
+constant, the dead time, the glare and the vignetting stay as configured.
+A few minutes on one core.
 
 With `--features DIR` (the release's 1D CNN statistics, REFERENCE Part 7)
 the fit adds Part 7's targets on the same expected counts: each zone's mean
 of z = (log1p(counts) - 7.108) / 0.785 against Part 7's (a 0.05 z scale), and
 the layer-1 channel variances of the raw-count and the log-input nets (every
 channel's log(var / running_var), a 0.15 scale shared by each group's
-channels so that a group weighs as five residuals); and frees four more
+channels so that a group weighs as five residuals); and frees six more
 physical terms: the room light apart from the dark counts, the slow tail's
 time constant, the SPADs' dead time, the receiver's glare, the flood's
-profile order and its vertical width apart from the receiver's aspect. Layers 2 and 3 are not fitted: the final report gives
-them, held out (`rig.feature_moments`). `--max-nfev` bounds the evaluations.
+profile order and its vertical width apart from the receiver's aspect.
+Layers 2 and 3 are not fitted: the final report gives them, held out
+(`rig.feature_moments`). `--max-nfev` bounds the evaluations.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 from scipy.optimize import least_squares
+from scipy.special import expit, logit
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.objects import load_catalogue
@@ -57,7 +60,7 @@ from denali_pipe.rig.scene import design_scene
 
 REPO = Path(__file__).resolve().parents[1]
 ZONE_SCALE = 0.07
-# Part 7's targets (with --features): z zone means, layer-1 log variance ratios' quantiles
+# Part 7's targets (with --features): z zone means, every layer-1 channel's log variance ratio
 LOG_ZONE_SCALE = 0.05
 VAR_SCALE = 0.15
 GROUP_WEIGHT = 5
@@ -79,36 +82,34 @@ CHECKS = (
 
 
 def to_photometry(base: H.Photometry, v: np.ndarray) -> H.Photometry:
-    """The 8 zone parameters, then (with --features) room light, slow tail's time constant, dead time, glare, the flood's order."""
+    """The 8 zone parameters, then (with --features) room light, slow tail's
+    time constant, dead time, glare, the flood's order and vertical width."""
     flood, core_logit, core, yaw, flux, sat, dark, slow_logit = v[:8]
+    vertical = np.exp(flood) * ASPECT
     more = {}
     if len(v) > 8:
-        ambient, slow_bins, dead, glare_logit, order, flood_y = v[8:]
+        ambient, slow_bins, dead, glare_logit, order, vertical_log = v[8:]
+        vertical = np.exp(vertical_log)
         more = {
             "ambient_counts": float(np.exp(ambient)),
             "slow_tail_bins": float(np.exp(slow_bins)),
             "dead_time_counts": float(np.exp(dead)),
-            "glare_share": float(1 / (1 + np.exp(-glare_logit))),
+            "glare_share": float(expit(glare_logit)),
             "beam_order": float(np.exp(order)),
-            "beam_hwhm_deg": (float(np.exp(flood)), float(np.exp(flood_y))),
         }
     phot = dataclasses.replace(
         base,
-        beam_hwhm_deg=(float(np.exp(flood)), float(np.exp(flood) * ASPECT)),
-        core_share=float(1 / (1 + np.exp(-core_logit))),
+        beam_hwhm_deg=(float(np.exp(flood)), float(vertical)),
+        core_share=float(expit(core_logit)),
         core_hwhm_deg=float(np.exp(core)),
         beam_yaw_deg=float(yaw),
         direct_peak_counts=float(np.exp(flux)),
         saturation_counts=float(np.exp(sat)),
         dark_counts=float(np.exp(dark)),
         ambient_counts=float(2 * np.exp(dark)),
-        slow_tail_fraction=float(1 / (1 + np.exp(-slow_logit))),
+        slow_tail_fraction=float(expit(slow_logit)),
     )
     return dataclasses.replace(phot, **more)
-
-
-def _logit(x: float) -> float:
-    return float(np.log(x / (1 - x)))
 
 
 def from_photometry(p: H.Photometry, features: bool = False) -> np.ndarray:
@@ -117,7 +118,7 @@ def from_photometry(p: H.Photometry, features: bool = False) -> np.ndarray:
             np.log(p.ambient_counts),
             np.log(p.slow_tail_bins),
             np.log(p.dead_time_counts),
-            _logit(p.glare_share),
+            logit(p.glare_share),
             np.log(p.beam_order),
             np.log(p.beam_hwhm_deg[1]),
         ]
@@ -127,13 +128,13 @@ def from_photometry(p: H.Photometry, features: bool = False) -> np.ndarray:
     return np.array(
         [
             np.log(p.beam_hwhm_deg[0]),
-            _logit(p.core_share),
+            logit(p.core_share),
             np.log(p.core_hwhm_deg),
             p.beam_yaw_deg,
             np.log(p.direct_peak_counts),
             np.log(p.saturation_counts),
             np.log(p.dark_counts),
-            _logit(p.slow_tail_fraction),
+            logit(p.slow_tail_fraction),
             *more,
         ]
     )
@@ -172,10 +173,10 @@ def measures(phot: H.Photometry, catalogue: dict) -> tuple[np.ndarray, dict, np.
                 means.append(expected.mean(-1))
                 hists.append(expected.reshape(9, -1))
                 logs.append(np.log1p(H.sample_counts(expected, phot, rng)))
-    zones = H.counts_from_transport("3x3", False, transport(catalogue, "square", 45, phot, mount_only=True), phot)
-    background = zones[1, 1]
+    mount = H.counts_from_transport("3x3", False, transport(catalogue, "square", 45, phot, mount_only=True), phot)
+    background = mount[1, 1]
     b = measure(background, background)
-    zones = zones.reshape(9, -1)
+    zones = mount.reshape(9, -1)
     corners = np.mean([early_share(zones, z) for z in (0, 6)])
     c = measure(H.counts_from_transport("3x3", False, transport(catalogue, "square", 45, phot), phot)[1, 1], background)
     eight = H.counts_from_transport("3x3", False, transport(catalogue, "8", 90, phot), phot)[1, 1]
