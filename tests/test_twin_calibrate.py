@@ -4,6 +4,7 @@ residual falls, and the file round-trips into calibrated twins."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from types import SimpleNamespace
 
@@ -24,10 +25,11 @@ SETTINGS = {
     "calibration": {
         "film": 2, "samples": 10, "validation_fraction": 0.2, "max_captures": 0,
         "bootstrap_resamples": 50, "level": 0.9, "max_evaluations": 500,
-        "pulse": {"sigma_bins": 1.0, "tail_bins": 1.0},
+        "pulse": {"sigma_bins": 1.0, "tail_bins": 1.0}, "glare_share": 0.02,
     },
 }  # fmt: skip
-GLOBALS = (*C.GLOBALS, "lobe_width_deg", "diffuse_share")
+GLOBALS = (*C.GLOBALS, "lobe_width_deg", "diffuse_share", C.GLARE)
+GLARE_LOGIT = np.log(0.06 / 0.94)  # the planted glare: 6 % of the light over the array
 FLOOD = {**SETTINGS, "illumination": "flood", "flood": {"grid": 2, "beam_hwhm_deg": [26.0, 20.5]}}
 
 
@@ -52,8 +54,8 @@ def _plant(cal, catalogue, settings, tail):
     truth[18:27] = np.log(rng.uniform(0.9, 1.15, 9))
     truth[27:] = tail
     dummy = C.Captures(np.zeros((len(keys), R, 3, 3, T), np.float32), keys, CROP)
-    m = C.Problem(C.Model(cal, specs, keys, settings), dummy, settings).twins(truth)
-    mean = rng.uniform(0.5, 2, 9)[None, :, None] * m * 1e3 / m.max()
+    problem = C.Problem(C.Model(cal, specs, keys, settings), dummy, settings)
+    mean = problem.expected(truth, rng.uniform(0.5, 2, 9) * 1e3 / problem.twins(truth).max())
     real = mean[:, None] + rng.normal(0, 0.005 * mean.max(), (len(keys), R, 9, T))
     return truth, C.Captures(real.reshape(len(keys), R, 3, 3, T).astype(np.float32), keys, CROP), specs
 
@@ -61,7 +63,7 @@ def _plant(cal, catalogue, settings, tail):
 @pytest.fixture(scope="module")
 def planted(cal, catalogue):
     # a pulse that rises within a bin and decays over several, as a SPAD's does
-    return _plant(cal, catalogue, SETTINGS, [1.7, np.log(0.8), np.log(2.5), np.log(14.0), np.log(0.4 / 0.6)])
+    return _plant(cal, catalogue, SETTINGS, [1.7, np.log(0.8), np.log(2.5), np.log(14.0), np.log(0.4 / 0.6), GLARE_LOGIT])
 
 
 @pytest.fixture(scope="module")
@@ -180,7 +182,7 @@ def test_8x8_follows_the_3x3_fit(cal):
     scales = np.linspace(0.9, 1.1, 9).reshape(3, 3)
     from denali_pipe.twin.layout import Material
 
-    f = C.Fitted(offsets, scales, 0.0, Pulse(1.0, 1.0), np.ones((3, 3)), Material("lambertian", 0.5), "spot", None)
+    f = C.Fitted(offsets, scales, 0.0, Pulse(1.0, 1.0), np.ones((3, 3)), Material("lambertian", 0.5), "spot", None, 0.0)
     z8 = f.zones(cal, 8)
     assert np.allclose(z8.offsets[..., 0], 0.012, atol=1e-9) and np.allclose(z8.offsets[..., 1], -0.004, atol=1e-9)
     assert np.allclose(z8.scales, 1.0)
@@ -202,9 +204,9 @@ def test_at_bound_names_the_pinned_coordinates():
 def test_gains_are_never_negative():
     # a zone whose data run against its twin (background residue, no return)
     # gets no gain rather than an upside-down twin; elsewhere least squares
-    m = np.ones((4, 2, 5))
-    problem = SimpleNamespace(y=np.stack([-m[:, 0], 2 * m[:, 1]], axis=1))
-    assert C.Problem.gains(problem, m).tolist() == [0.0, 2.0]
+    m = np.ones((4, 9, 5))
+    problem = SimpleNamespace(y=np.concatenate([-m[:, :1], 2 * m[:, 1:]], axis=1), sigma=np.ones(9))
+    assert np.allclose(C.Problem.gains(problem, m, 0.0), [0.0, *[2.0] * 8])
 
 
 def _linear_problem(n=60, m=5, q=3, seed=0):
@@ -284,7 +286,7 @@ def test_recovered_on_a_scene_the_twin_was_not_designed_on(catalogue, tmp_path):
     measures the intervals' coverage over many plantings (docs/twin.md)."""
     from denali_pipe.twin.layout import perturbed_scene
 
-    assert C.tail_names(FLOOD) == [*C.GLOBALS, "diffuse_share", *C.EMISSION]
+    assert C.tail_names(FLOOD) == [*C.GLOBALS, "diffuse_share", *C.EMISSION, C.GLARE]
     rng = np.random.default_rng(7)
     locations = sorted(rng.choice(100, 10, replace=False).tolist())
     path = tmp_path / "scene.json"
@@ -300,7 +302,7 @@ def test_recovered_on_a_scene_the_twin_was_not_designed_on(catalogue, tmp_path):
     truth = C.initial(FLOOD)
     truth[:18] = rng.uniform(-1.5, 1.5, 18)
     truth[18:27] = np.log(rng.uniform(0.9, 1.15, 9))
-    truth[27:] = [0.8, np.log(0.7), np.log(2.0), np.log(0.1 / 0.9), np.log(10.0), np.log(8.0)]
+    truth[27:] = [0.8, np.log(0.7), np.log(2.0), np.log(0.1 / 0.9), np.log(10.0), np.log(8.0), GLARE_LOGIT]
     m = problem.twins(truth)
     gains = rng.uniform(0.5, 2, 9) * 1e3 / m.max()
     captures = C.planted_captures(problem, truth, gains, 0.01 * float((gains[None, :, None] * m).max()), R, rng)
@@ -309,7 +311,7 @@ def test_recovered_on_a_scene_the_twin_was_not_designed_on(catalogue, tmp_path):
     for k in C.tail_names(FLOOD):
         se = float(np.asarray(result.se[k]))
         assert k in result.not_identified or abs(got[k] - want[k]) <= 4 * se, (k, got[k], want[k], se)
-    for k in C.EMISSION:
+    for k in (*C.EMISSION, C.GLARE):
         lo, hi = result.interval[k]
         assert k not in result.not_identified and lo <= want[k] <= hi, (k, want[k], lo, hi)
     for k, v in got.items():
@@ -326,3 +328,30 @@ def test_recovered_on_a_scene_the_twin_was_not_designed_on(catalogue, tmp_path):
     tw = f.twin_scene(cal, _mesh(catalogue), {**FLOOD, "illumination": "spot"}, 3, catalogue["A"])  # the file's illumination, whatever the settings say
     assert tw.flood is not None and tw.flood.hwhm_deg == pytest.approx(f.hwhm_deg)
     assert tw.material.lobe_width_deg == SETTINGS["retroreflective"]["lobe_width_deg"]  # kept, unused
+
+
+def test_the_calibrated_twin_holds_every_zones_light_through_the_glare():
+    """Times its gains, the calibrated 3x3 twin is the model the fit used:
+    each zone's own light less the glare's share, plus its part of all the
+    zones' (`C.mixing`); a zone of gain 0 takes the others' median for its
+    own light; no glare leaves the twin as rendered."""
+    from denali_pipe.twin.layout import Material
+
+    rng = np.random.default_rng(5)
+    hist = rng.uniform(0, 1, (4, 3, 3, 16))
+    gains = rng.uniform(0.5, 2, (3, 3))
+    f = C.Fitted(np.zeros((3, 3, 2)), np.ones((3, 3)), 0.0, Pulse(1.0, 1.0), gains, Material("lambertian", 0.5), "flood", (10.0, 8.0), 0.06)
+    light = gains[..., None] * hist
+    want = np.einsum("zk,lkt->lzt", C.mixing(0.06), light.reshape(4, 9, 16)).reshape(hist.shape)
+    assert np.allclose(gains[..., None] * f.receive(hist), want)
+    # every zone holds the others' light
+    assert (f.receive(hist)[:, 1, 1] != hist[:, 1, 1]).all()
+    assert np.allclose(dataclasses.replace(f, glare_share=0.0).receive(hist), hist)
+    dead = gains.copy()
+    dead[0, 0] = 0.0
+    g = dataclasses.replace(f, gains=dead)
+    stand_in = dead.copy()
+    stand_in[0, 0] = np.median(dead[dead > 0])
+    assert np.allclose(
+        stand_in[..., None] * g.receive(hist), np.einsum("zk,lkt->lzt", C.mixing(0.06), (stand_in[..., None] * hist).reshape(4, 9, 16)).reshape(hist.shape)
+    )

@@ -6,7 +6,8 @@ top, column 0 at the sensor's right), for the held-out capture with the
 most signal: its background-subtracted repeat mean (counts), the design
 twin (footprints as designed, no time offset; its zone gains and pulse
 fitted) and the calibrated
-twin, both times their gains and through the fitted pulse, on the real
+twin, both times their gains, mixed by the fitted glare and through the
+fitted pulse, on the real
 bins. Each title gives the zone's held-out residual (||real - twin|| /
 ||real|| over every held-out capture) before and after. The CSV beside it
 holds the plotted curves: zone_row, zone_col, bin, real, before, after.
@@ -25,8 +26,8 @@ from denali_pipe.twin.calibrate import GRID, Problem, Result
 
 def plot_calibration(result: Result, held: Problem, out_png: Path) -> None:
     i = int(np.argmax(held.y.sum(axis=(1, 2))))
-    before = result.gains_before[:, None] * held.twins(result.x_before)[i]
-    after = result.gains[:, None] * held.twins(result.x)[i]
+    before = held.expected(result.x_before, result.gains_before)[i]
+    after = held.expected(result.x, result.gains)[i]
     bins = held.crop + np.arange(held.T)
     fig, axes = plt.subplots(GRID, GRID, figsize=(11, 7.5), sharex=True, constrained_layout=True, squeeze=False)
     rows = []

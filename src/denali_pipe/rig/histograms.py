@@ -43,6 +43,7 @@ import numpy as np
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core import pulse
+from denali_pipe.core.glare import glare
 
 # Wall sub-samples per zone side: enough that the OPL spread inside one sample
 # cell (largest in the zones that see the wall obliquely, ~3 bins) stays near
@@ -351,17 +352,6 @@ def respond(x: np.ndarray, saturation: float, dead: np.ndarray | float) -> np.nd
     before = np.cumsum(x, axis=-1) - x
     detected = dead * -np.expm1(-x / dead) * np.exp(-before / dead)
     return saturation * -np.expm1(-detected / saturation)
-
-
-def glare(light: np.ndarray, share: float, spads: np.ndarray) -> np.ndarray:
-    """What each zone collects (Z, ...) from the light `light` (Z, ...)
-    focused on it, once the receiver's veiling glare has spread `share` of
-    all of it over the SPAD array: every zone takes the part its SPADs
-    `spads` (Z,) hold. A dim zone beside a bright one then holds the bright
-    one's return at the bright one's time: the real far column's early
-    second peak (docs/rig_zones.md, "Glare")."""
-    area = (spads / spads.sum()).reshape((-1,) + (1,) * (light.ndim - 1))
-    return (1.0 - share) * light + share * area * light.sum(axis=0, keepdims=True)
 
 
 def _gain(phot: Photometry) -> float:

@@ -13,7 +13,13 @@ Parameters:
 - under `twin.illumination: flood`, the emission's half widths (deg,
   horizontal and vertical): how much light each part of the wall gets, which
   sets each zone's retroreflected return against the light every zone's
-  footprint sends the object.
+  footprint sends the object;
+- the receiver's glare share (`core.glare`): the share of all the light
+  reaching the receiver that its optics spread over the whole SPAD array,
+  so that every zone holds the others' returns at their times. A zone far
+  from the object's brightest return holds that return, through the glare,
+  as well as its own; a twin without it bends its emission to light the far
+  zones instead (the demo's flood went to its 90 deg bound).
 Nuisances, fitted beside them but not part of the twin: each zone's gain
 (counts per unit of the twin's radiance: the sensor's illumination and
 response pattern, solved in closed form at every step) and the sensor's
@@ -23,9 +29,11 @@ out: background subtraction leaves too little of it to identify (fitted
 on the demo, its share went to its 0.25 % bound and its time constant to
 its bound, with the held-out residual unchanged).
 
-The model of zone z of capture i is gain_z * (k * h_iz)[b], h the analytic
-twin (tent filter, `twin.calibration` film and samples) of the zone's
-footprint, k the pulse shifted by time_offset bins. A SPAD's response rises
+The model of zone z of capture i is glare(gain * (k * h_i))_z[b], h the
+analytic twin (tent filter, `twin.calibration` film and samples) of each
+zone's footprint, k the pulse shifted by time_offset bins, the gains the
+light each zone's own footprint sends it and `glare` the receiver's mixing
+(equal SPAD groups: `GLARE_SPADS`). A SPAD's response rises
 within a bin or two and decays over many; a symmetric pulse cannot follow a
 bump of that shape, and the geometry then bends to make up for it. The data
 are the background-subtracted 3x3 light-on captures of the training split
@@ -56,12 +64,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, nnls
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core import pulse
 from denali_pipe.core.atomic import atomic_file
 from denali_pipe.core.floor import common_offset, kept_bins, offset_spread
+from denali_pipe.core.glare import glare
 from denali_pipe.core.meshes import object_mesh
 from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.core.pulse import Pulse
@@ -72,7 +81,7 @@ log = logging.getLogger(__name__)
 
 GRID = 3  # the grid the captures calibrate
 ZONES = GRID * GRID
-CALIBRATION_VERSION = 3  # 3: the flood's emission widths; 2: the SPAD pulse (jitter and tail) in place of a Gaussian
+CALIBRATION_VERSION = 4  # 4: the receiver's glare; 3: the flood's emission widths; 2: the SPAD pulse (jitter and tail) in place of a Gaussian
 PULSE = ("pulse_sigma", "pulse_tail")  # the pulse's parameters, as named in the file
 GLOBALS = ("time_offset", *PULSE)  # the fit coordinates after the zones', before the material's
 # Finite-difference steps of the Jacobian, in the fit's own coordinates (see `_unpack`).
@@ -89,14 +98,21 @@ OFFSET_CM_BOUND = 10.0
 PULSE_BOUNDS = ((0.2, 15.0), (0.1, 15.0))
 HWHM_BOUNDS_DEG = (3.0, 90.0)
 EMISSION = ("beam_hwhm_h_deg", "beam_hwhm_v_deg")  # the flood's parameters, as named in the file
+GLARE = "glare_share"  # the receiver's, as named in the file
+# The share of the glare each zone takes: its SPADs' share of the array. The
+# twin takes the 3x3 map's zones as equal SPAD groups; a zone's gain carries
+# what its own footprint's light costs it, not what the glare brings.
+GLARE_SPADS = np.ones(ZONES)
+# The glare share's logit bounds: 1e-4 (none to speak of) to 0.5.
+GLARE_LOGIT_BOUNDS = (-9.2, 0.0)
 
 
 @dataclass(frozen=True)
 class Fitted:
     """A calibration: offsets (3, 3, 2) m, scales (3, 3), time_offset
     (bins), the pulse, gains (3, 3) counts per radiance, material, the
-    illumination it was fitted under and, for the flood, its emission half
-    widths (deg, horizontal and vertical)."""
+    illumination it was fitted under, for the flood its emission half
+    widths (deg, horizontal and vertical), and the receiver's glare share."""
 
     offsets: np.ndarray
     scales: np.ndarray
@@ -106,6 +122,21 @@ class Fitted:
     material: Material
     illumination: str
     hwhm_deg: tuple[float, float] | None
+    glare_share: float
+
+    def receive(self, hist: np.ndarray) -> np.ndarray:
+        """A 3x3 twin (..., 3, 3, T) in radiance as each zone collects it once
+        the receiver's glare has mixed every zone's light (`core.glare`):
+        glare(gains * hist) / gains, zone by zone. A zone whose gain is 0 (its
+        captures held no return of its own the fit could follow) takes the
+        median of the others' for this: its own footprint's light then counts
+        as much as a typical zone's, and the glare it holds as any zone's."""
+        gains = self.gains.reshape(ZONES)
+        own = np.where(gains > 0, gains, np.median(gains[gains > 0]) if (gains > 0).any() else 1.0)
+        lead = hist.shape[:-3]
+        light = np.moveaxis(hist.reshape(*lead, ZONES, hist.shape[-1]), -2, 0) * own.reshape((ZONES,) + (1,) * (len(lead) + 1))
+        mixed = glare(light, self.glare_share, GLARE_SPADS) / own.reshape((ZONES,) + (1,) * (len(lead) + 1))
+        return np.moveaxis(mixed, 0, -2).reshape(hist.shape)
 
     def zones(self, cal: Calibration, n: int) -> ZoneGeometry:
         """The footprints of an n x n grid: the fit itself for 3x3, its affine
@@ -157,7 +188,7 @@ class Model:
     def __init__(self, cal: Calibration, specs: dict, keys: pd.DataFrame, settings: dict):
         self.cal, self.settings, self.keys = cal, settings, keys
         self.meshes = {(name, size): object_mesh(specs[name], size) for (name, size), _ in keys.groupby(["object", "size"], sort=False)}
-        self._light(_unpack(initial(settings), settings)[-1])  # the design's light, as the fit's first step computes it
+        self._light(_unpack(initial(settings), settings)[4])  # the design's light, as the fit's first step computes it
 
     def _light(self, hwhm_deg: tuple[float, float] | None) -> None:
         """Renderers and object terms under the flood of `hwhm_deg` (None: the spot)."""
@@ -199,11 +230,12 @@ def _flood(settings: dict) -> bool:
 
 def tail_names(settings: dict) -> list[str]:
     """The fit's coordinates after the zones', by name: `GLOBALS`, the
-    material's (the lobe width under the spot only), the flood's emission."""
+    material's (the lobe width under the spot only), the flood's emission,
+    the receiver's glare."""
     names = list(GLOBALS)
     if _rr(settings):
         names += ["diffuse_share"] if _flood(settings) else ["lobe_width_deg", "diffuse_share"]
-    return names + (list(EMISSION) if _flood(settings) else [])
+    return names + (list(EMISSION) if _flood(settings) else []) + [GLARE]
 
 
 def initial(settings: dict) -> np.ndarray:
@@ -211,7 +243,8 @@ def initial(settings: dict) -> np.ndarray:
     `footprint.scale`, time offset 0, the log times of `calibration.pulse`,
     with a retroreflective object the logit diffuse share (and under the
     spot the log lobe width) of `twin.retroreflective`, under the flood the
-    log emission widths of `flood.beam_hwhm_deg`."""
+    log emission widths of `flood.beam_hwhm_deg`, and the logit of
+    `calibration.glare_share`."""
     p = settings["calibration"]["pulse"]
     x = [
         *np.zeros(2 * ZONES),
@@ -225,17 +258,18 @@ def initial(settings: dict) -> np.ndarray:
         x += ([] if _flood(settings) else [np.log(lobe["lobe_width_deg"])]) + [np.log(d / (1 - d))]
     if _flood(settings):
         x += list(np.log(settings["flood"]["beam_hwhm_deg"]))
-    return np.array(x, float)
+    g = settings["calibration"]["glare_share"]
+    return np.array(x + [np.log(g / (1 - g))], float)
 
 
 def _logistic(v: float) -> float:
     return float(1 / (1 + np.exp(-v)))
 
 
-def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, Material, tuple[float, float] | None]:
+def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, Material, tuple[float, float] | None, float]:
     """Fit coordinates -> (zone geometry, time offset bins, pulse, material,
-    the flood's emission half widths (deg) or None under the spot).
-    Offsets in cm, scales, times and widths as logs, the diffuse share as a logit: steps of
+    the flood's emission half widths (deg) or None under the spot, the glare share).
+    Offsets in cm, scales, times and widths as logs, the shares as logits: steps of
     similar effect, and the bounds of the physical parameters hold by construction."""
     off = x[: 2 * ZONES].reshape(GRID, GRID, 2) / 100
     scales = np.exp(x[2 * ZONES : 3 * ZONES]).reshape(GRID, GRID)
@@ -248,7 +282,7 @@ def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, 
         width = float(np.exp(tail["lobe_width_deg"])) if "lobe_width_deg" in tail else material.lobe_width_deg
         material = Material("retroreflective", material.albedo, width, _logistic(tail["diffuse_share"]))
     hwhm = tuple(float(np.exp(tail[k])) for k in EMISSION) if _flood(settings) else None
-    return ZoneGeometry(off, scales), t0, p, material, hwhm
+    return ZoneGeometry(off, scales), t0, p, material, hwhm, _logistic(tail[GLARE])
 
 
 # The trust-region solver keeps its iterates strictly inside the bounds and
@@ -278,7 +312,7 @@ IDENTIFIED_SPAN = 0.25
 def _bounds(settings: dict) -> tuple[np.ndarray, np.ndarray]:
     lo = [*np.full(2 * ZONES, -OFFSET_CM_BOUND), *np.full(ZONES, np.log(0.3)), -20.0, *np.log([b[0] for b in PULSE_BOUNDS])]
     hi = [*np.full(2 * ZONES, OFFSET_CM_BOUND), *np.full(ZONES, np.log(3.0)), 20.0, *np.log([b[1] for b in PULSE_BOUNDS])]
-    tail = {"lobe_width_deg": np.log([0.5, 60.0]), "diffuse_share": (-6.0, 6.0), **dict.fromkeys(EMISSION, np.log(HWHM_BOUNDS_DEG))}
+    tail = {"lobe_width_deg": np.log([0.5, 60.0]), "diffuse_share": (-6.0, 6.0), **dict.fromkeys(EMISSION, np.log(HWHM_BOUNDS_DEG)), GLARE: GLARE_LOGIT_BOUNDS}
     for name in tail_names(settings)[len(GLOBALS) :]:
         lo.append(tail[name][0])
         hi.append(tail[name][1])
@@ -356,32 +390,52 @@ class Problem:
         """(N, Z, T) the twins blurred by the pulse, in the real bins the
         captures keep (0 in the others, as the preprocessing left the
         captures), before the gains."""
-        zones, t0, p, material, hwhm = _unpack(x, self.settings)
+        zones, t0, p, material, hwhm, _ = _unpack(x, self.settings)
         h = np.stack([self.zone_twin(z, zones, material, hwhm) for z in range(ZONES)], axis=1)
         return pulse.convolve(h, pulse.kernel(p, t0))[..., self.crop : self.crop + self.T] * self.kept
 
-    def gains(self, m: np.ndarray) -> np.ndarray:
-        """(Z,) least-squares gain of each zone's twins m (N, Z, T) against y,
-        non-negative: a zone counts photons. (Unconstrained, a zone whose data
-        hold no return the twin can follow, such as a dim corner's background
-        residue, took a negative gain and an upside-down twin; each zone's
-        gain is a one-dimensional problem, so clipping is its exact NNLS.)"""
-        return np.maximum((m * self.y).sum(axis=(0, 2)) / np.maximum((m * m).sum(axis=(0, 2)), 1e-300), 0.0)
+    def gains(self, m: np.ndarray, share: float) -> np.ndarray:
+        """(Z,) the zones' least-squares gains for twins m (N, Z, T) against y
+        under a glare of `share`, non-negative: a zone counts photons.
+        (Unconstrained, a zone whose data hold no return the twin can follow,
+        such as a dim corner's background residue, took a negative gain and an
+        upside-down twin.) The glare couples the zones, so the gains are one
+        non-negative least squares over all of them, solved on its 9 x 9
+        normal equations; without glare each zone's stands alone."""
+        mix = mixing(share)  # (Z, Z): zone z collects mix[z, k] of zone k's light
+        w = mix / self.sigma[:, None] ** 2
+        gram = np.einsum("nkt,nlt->kl", m, m) * (mix.T @ w)
+        rhs = np.einsum("zk,nkt,nzt->k", w, m, self.y)
+        scale = np.sqrt(np.maximum(np.diagonal(gram), 1e-300))
+        root = np.linalg.cholesky(gram / np.outer(scale, scale) + 1e-12 * np.eye(ZONES))
+        return nnls(root.T, np.linalg.solve(root, rhs / scale))[0] / scale
+
+    def expected(self, x: np.ndarray, gains: np.ndarray | None = None) -> np.ndarray:
+        """(N, Z, T) the counts the model puts in each kept bin at x: the
+        gains (fitted unless given) times the twins, mixed by the glare."""
+        m = self.twins(x)
+        share = _unpack(x, self.settings)[-1]
+        g = self.gains(m, share) if gains is None else gains
+        return np.einsum("zk,nkt->nzt", mixing(share), g[None, :, None] * m)
 
     def residuals(self, x: np.ndarray, gains: np.ndarray | None = None) -> np.ndarray:
         """(N, Z, T) noise-weighted residuals, gains fitted unless given."""
-        m = self.twins(x)
-        g = self.gains(m) if gains is None else gains
-        return (self.y - g[None, :, None] * m) / self.sigma[None, :, None]
+        return (self.y - self.expected(x, gains)) / self.sigma[None, :, None]
+
+
+def mixing(share: float) -> np.ndarray:
+    """(Z, Z) the receiver's glare as a matrix over zones (`core.glare`):
+    row z, what zone z collects of each zone's light."""
+    return glare(np.eye(ZONES), share, GLARE_SPADS)
 
 
 def planted_captures(problem: Problem, truth: np.ndarray, gains: np.ndarray, noise_sd: float, repeats: int, rng: np.random.Generator) -> Captures:
     """Captures the twin itself renders at fit coordinates `truth`: the
-    twins of `problem`'s captures (`Problem.twins`) times each zone's gain
-    (Z,), `repeats` repeats with Gaussian noise of sd `noise_sd` (counts)
+    twins of `problem`'s captures times each zone's gain (Z,), mixed by the
+    truth's glare (`Problem.expected`), `repeats` repeats with Gaussian noise of sd `noise_sd` (counts)
     each, in `problem`'s bins. For the recovery tests and the coverage
     script (scripts/calibration_coverage.py)."""
-    mean = gains[None, :, None] * problem.twins(truth)
+    mean = problem.expected(truth, gains)
     n, _, t = mean.shape
     real = mean[:, None] + rng.normal(0, noise_sd, (n, repeats, ZONES, t))
     return Captures(real.reshape(n, repeats, GRID, GRID, t).astype(np.float32), problem.model.keys, problem.crop)
@@ -426,10 +480,10 @@ def at_bound(x: np.ndarray, settings: dict, interval: np.ndarray | None = None) 
 
 def to_physical(x: np.ndarray, settings: dict) -> dict:
     """The fit coordinates as the named physical parameters: the zones'
-    footprints, `GLOBALS`, the material's lobe and the flood's emission (`tail_names`)."""
-    zones, t0, p, material, hwhm = _unpack(x, settings)
+    footprints, `GLOBALS`, the material's lobe, the flood's emission and the glare (`tail_names`)."""
+    zones, t0, p, material, hwhm, share = _unpack(x, settings)
     tail = {"time_offset": t0, **dict(zip(PULSE, (p.sigma_bins, p.fast_tail_bins)))}
-    tail |= {"lobe_width_deg": material.lobe_width_deg, "diffuse_share": material.diffuse_share, **dict(zip(EMISSION, hwhm or ()))}
+    tail |= {"lobe_width_deg": material.lobe_width_deg, "diffuse_share": material.diffuse_share, **dict(zip(EMISSION, hwhm or ())), GLARE: share}
     out = {"offset_u": zones.offsets[..., 0], "offset_v": zones.offsets[..., 1], "scale": zones.scales}
     return out | {k: tail[k] for k in tail_names(settings)}
 
@@ -502,9 +556,9 @@ def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict,
     for p in (problem, held):
         p.take_floor_offsets(x0)
     x_before = nuisance_fit(problem, x0)
-    gains_before = problem.gains(problem.twins(x_before))
+    gains_before = problem.gains(problem.twins(x_before), _unpack(x_before, settings)[-1])
     x, fit_record = fit(problem, x_before, c["max_evaluations"])
-    gains = problem.gains(problem.twins(x))
+    gains = problem.gains(problem.twins(x), _unpack(x, settings)[-1])
     boots = linearised_bootstrap(problem, x, gains, c["bootstrap_resamples"], rng)
     u = uncertainty(x, boots, settings, c["level"])
     result = Result(
@@ -530,8 +584,9 @@ def capture_jacobian(problem: Problem, x: np.ndarray, gains: np.ndarray) -> tupl
         xk[k] += h
         jac[..., k] = (problem.residuals(xk, gains) - r0) / h
     m = problem.twins(x)
-    for z in range(zones):
-        jac[:, z, :, len(x) + z] = -m[:, z] / problem.sigma[z]
+    mix = mixing(_unpack(x, problem.settings)[-1])
+    for k in range(zones):
+        jac[:, :, :, len(x) + k] = -mix[None, :, k, None] * m[:, k, None] / problem.sigma[None, :, None]
     return r0.reshape(n, -1), jac.reshape(n, zones * t, -1)
 
 
@@ -655,6 +710,7 @@ def write_calibration(path: Path, result: Result, settings: dict, record: dict) 
             "lobe_width_deg": "deg",
             "diffuse_share": "1",
             **dict.fromkeys(EMISSION, "deg"),
+            GLARE: "1",
         },
         "se": result.se,
         "interval": result.interval,
@@ -687,8 +743,9 @@ def read_calibration(path: Path) -> Fitted:
         pulse_of = Pulse(*(float(p[k]) for k in PULSE))
         hwhm = tuple(float(p[k]) for k in EMISSION) if d["illumination"] == "flood" else None
         return Fitted(
-            offsets, np.asarray(p["scale"], float), float(p["time_offset"]), pulse_of, np.asarray(d["gains"], float), material, d["illumination"], hwhm
-        )
+            offsets, np.asarray(p["scale"], float), float(p["time_offset"]), pulse_of, np.asarray(d["gains"], float), material, d["illumination"], hwhm,
+            float(p[GLARE]),
+        )  # fmt: skip
     except (OSError, KeyError, TypeError, ValueError) as e:
         raise ValueError(f"{path}: not a twin calibration ({type(e).__name__}: {e})") from None
 

@@ -9,7 +9,10 @@ Store layout (Zarr v3, one group), per rendered grid n x n (3x3, 8x8):
                                    in radiance per unit laser intensity per
                                    bin, sensor-relative optical path like the
                                    real data (bin b covers HIST_START_OPL +
-                                   [b, b+1) w); zones in the captures' order
+                                   [b, b+1) w); zones in the captures' order;
+                                   a calibrated 3x3 grid as each zone collects
+                                   it through the receiver's glare
+                                   (`calibrate.Fitted.receive`)
 
 Root attributes: denali_twin (format version), object (its sheet row), size,
 resolutions, renderer, config (the `twin` settings used), material,
@@ -18,6 +21,7 @@ design geometry), seed, bin_width_opl, start_opl, time_offset_opl,
 footprints ({grid: [centre, u, v, size] per zone}), laser_spot, sensor,
 illumination ("spot" or "flood") and flood_hwhm_deg (the flood's emission
 half widths, deg, horizontal and vertical; None under the spot),
+glare_share (the receiver's, from the calibration; None for the design),
 scene_json (path and sha256), seconds (wall time per location, all grids).
 
 Version 1 stores (the centre zone only) are refused: rerender them.
@@ -80,7 +84,9 @@ def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out
     config: {"seed": int, "resolutions": ["3x3", ...], "twin": the twin
     section (renderer, albedos, material, footprint, table and the chosen
     renderer's settings)}. calibration: twin_calibration.json (`twin.calibrate`):
-    its footprints, time offset, lobe and illumination replace the design's."""
+    its footprints, time offset, lobe and illumination replace the design's,
+    and its 3x3 grid takes the receiver's glare (the gains that weigh one
+    zone's light against another's are fitted on 3x3 only)."""
     settings = config["twin"]
     cal = load_calibration(scene_json)
     mesh = object_mesh(spec, size)
@@ -107,7 +113,7 @@ def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out
             out_res.append(renderer.render(location).mean(axis=(1, 2)).reshape(n, n, geo.N_BINS))
             seconds[i] += time.perf_counter() - t0
             log.info("%s %s %s location %d (%d/%d): %.3f s", spec.name, size, res, location, i + 1, len(cal.locations), time.perf_counter() - t0)
-        histograms[res] = np.stack(out_res)
+        histograms[res] = fitted.receive(np.stack(out_res)) if fitted and n == 3 else np.stack(out_res)
         footprints[res] = [[r.centre.tolist(), r.u.tolist(), r.v.tolist(), list(r.size)] for r in twin.relays]
     attrs = {
         "denali_twin": TWIN_VERSION,
@@ -126,6 +132,7 @@ def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out
         "laser_spot": twin.spot.tolist(),
         "illumination": "spot" if twin.flood is None else "flood",
         "flood_hwhm_deg": None if twin.flood is None else list(twin.flood.hwhm_deg),
+        "glare_share": fitted.glare_share if fitted else None,
         "sensor": twin.sensor.tolist(),
         "scene_json": _sha(scene_json),
         "seconds": seconds.tolist(),
