@@ -9,13 +9,15 @@ the sensor and every object pose moved and turned, its own seed), 12
 gantry locations drawn at random, two objects (A 8 in, circle 4 in), and
 parameters drawn at random under the flood (`draw_truth`: footprints within
 +-1.5 cm and 0.9-1.15x, a time offset, a SPAD pulse, a diffuse share of
-0.05-0.5 and emission half widths of 4-15 deg, as narrow as the demo's fit);
+0.05-0.5, emission half widths of 4-15 deg, as narrow as the demo's fit, and
+a receiver glare of 0.5-10 %);
 captures the twin renders there with Gaussian noise (`calibrate.planted_captures`,
 `--noise` of the brightest bin); the calibration (`calibrate.calibrate`,
 starting from the design twin, 26 x 20.5 deg) run on them. Printed: the
 share of coordinates whose interval (`twin.calibration.level`, 90 %) holds
 the truth, over all of them, over those not flagged `not_identified`, and
-per group (zone footprints; globals: time offset, pulse, share, widths), and
+per group (zone footprints; globals: time offset, pulse, share, widths,
+glare), and
 how many were flagged. The calibration's settings are the tests' (film 2,
 10 samples across the object): ~10 CPU-s a planting.
 """
@@ -45,7 +47,7 @@ SETTINGS = {
     "calibration": {
         "film": 2, "samples": 10, "validation_fraction": 0.2, "max_captures": 0,
         "bootstrap_resamples": 100, "level": 0.9, "max_evaluations": 200,
-        "pulse": {"sigma_bins": 1.0, "tail_bins": 1.0},
+        "pulse": {"sigma_bins": 1.0, "tail_bins": 1.0}, "glare_share": 0.02,
     },
 }  # fmt: skip
 CROP, BINS, REPEATS = 60, 60, 3
@@ -58,7 +60,8 @@ def draw_truth(rng: np.random.Generator) -> np.ndarray:
     x[2 * C.ZONES : 3 * C.ZONES] = np.log(rng.uniform(0.9, 1.15, C.ZONES))
     share = rng.uniform(0.05, 0.5)
     tail = [rng.uniform(-2, 2), np.log(rng.uniform(0.5, 1.2)), np.log(rng.uniform(1.0, 3.0)), np.log(share / (1 - share))]
-    x[3 * C.ZONES :] = tail + list(np.log(rng.uniform(4.0, 15.0, 2)))
+    glare = rng.uniform(0.005, 0.1)
+    x[3 * C.ZONES :] = tail + list(np.log(rng.uniform(4.0, 15.0, 2))) + [np.log(glare / (1 - glare))]
     return x
 
 
