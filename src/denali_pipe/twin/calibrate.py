@@ -132,11 +132,9 @@ class Fitted:
         median of the others' for this: its own footprint's light then counts
         as much as a typical zone's, and the glare it holds as any zone's."""
         gains = self.gains.reshape(ZONES)
-        own = np.where(gains > 0, gains, np.median(gains[gains > 0]) if (gains > 0).any() else 1.0)
-        lead = hist.shape[:-3]
-        light = np.moveaxis(hist.reshape(*lead, ZONES, hist.shape[-1]), -2, 0) * own.reshape((ZONES,) + (1,) * (len(lead) + 1))
-        mixed = glare(light, self.glare_share, GLARE_SPADS) / own.reshape((ZONES,) + (1,) * (len(lead) + 1))
-        return np.moveaxis(mixed, 0, -2).reshape(hist.shape)
+        own = np.where(gains > 0, gains, np.median(gains[gains > 0]) if (gains > 0).any() else 1.0)[:, None]
+        light = hist.reshape(*hist.shape[:-3], ZONES, hist.shape[-1]) * own
+        return (np.einsum("zk,...kt->...zt", mixing(self.glare_share), light) / own).reshape(hist.shape)
 
     def zones(self, cal: Calibration, n: int) -> ZoneGeometry:
         """The footprints of an n x n grid: the fit itself for 3x3, its affine
