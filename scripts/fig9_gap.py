@@ -100,12 +100,9 @@ def main() -> None:
         kept = kept_bins(r_train, axis=0)
         x_sim, y_sim = fig9.sim_samples(s_view[split.train], zones, y_train, zt, "noisy", f9["sim_copies"], SEED, crop, kept)
         x_sim_test, y_sim_test = fig9.sim_samples(s_view[split.test], zones, xy[split.test], zt, "noisy", 1, SEED + 1, crop, kept)
-        model, stats = fig9.train_localiser(x_sim, y_sim, hp, SEED, torch.float32)
+        localiser = fig9.train_localiser(x_sim, y_sim, hp, SEED, torch.float32)
         box = fig9.workspace(y_sim)
-        cnn = {
-            name: rmse(fig9.bound_to_workspace(fig9.predict(model, stats, x, hp.norm), *box), y)
-            for name, x, y in (("sim", x_sim_test, y_sim_test), ("real", x_test, y_test))
-        }
+        cnn = {name: rmse(fig9.bound_to_workspace(localiser.predict(x), *box), y) for name, x, y in (("sim", x_sim_test, y_sim_test), ("real", x_test, y_test))}
         rows = {
             "predict the mean": rmse(predict_mean_baseline(y_train, len(y_test)), y_test),
             "1-NN, noisy twins -> real": rmse(nearest(x_sim, y_sim, x_test), y_test),
@@ -119,8 +116,8 @@ def main() -> None:
         if len(zones) > 1:
             print("  1D CNN on noisy twins -> real, one zone zeroed in both (row, column: RMSE):")
             for r, c in np.ndindex(x_sim.shape[1:3]):
-                model, stats = fig9.train_localiser(zero_zone(x_sim, r, c), y_sim, hp, SEED, torch.float32)
-                real_rmse = rmse(fig9.bound_to_workspace(fig9.predict(model, stats, zero_zone(x_test, r, c), hp.norm), *box), y_test)
+                localiser = fig9.train_localiser(zero_zone(x_sim, r, c), y_sim, hp, SEED, torch.float32)
+                real_rmse = rmse(fig9.bound_to_workspace(localiser.predict(zero_zone(x_test, r, c)), *box), y_test)
                 print(f"    ({r}, {c}): {real_rmse:.3f}")
 
 

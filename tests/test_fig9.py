@@ -6,6 +6,8 @@ predict-the-mean baseline, and the real samples saved."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -171,8 +173,8 @@ def test_run_fig9_bounds_every_model_to_its_training_labels_box(data, monkeypatc
     real repeats alike) bound every model, the control's too."""
     pairs, xy = data
     # no training (the bound is the point, not the model): 28 fits were ~20 s
-    monkeypatch.setattr("denali_pipe.experiments.fig9.train_localiser", lambda x, y, hp, seed, precision: (None, None))
-    monkeypatch.setattr("denali_pipe.experiments.fig9.predict", lambda model, stats, x, norm: np.full((len(x), 2), 1e6))
+    far = SimpleNamespace(predict=lambda x: np.full((len(x), 2), 1e6))
+    monkeypatch.setattr("denali_pipe.experiments.fig9.train_localiser", lambda x, y, hp, seed, precision: far)
     one_seed = {**SETTINGS, "fig9": {**SETTINGS["fig9"], "seeds": [1]}}
     runs = run_fig9(pairs, xy, TRANSFORMS, one_seed, HP, split_seed=42)
     split = split_pairs(pairs.captures()[2], 42, SETTINGS["test_fraction"])

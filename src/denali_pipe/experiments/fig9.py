@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -52,7 +52,7 @@ from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train.metrics import predict_mean_baseline, regression_metrics
 from denali_pipe.train.models import cnn1d
 from denali_pipe.train.registry import N_LOCATION_OUTPUTS
-from denali_pipe.train.training import Hyper, fit, infer, loss_for
+from denali_pipe.train.training import Hyper, fit, infer, loss_for, position_head, standardise, target_statistics, to_metres
 from denali_pipe.transforms.sim_to_real import CENTRE_ZONE, FIDELITIES, GRID, ZONES, Pairs, ZoneTransforms, split_pairs
 
 log = logging.getLogger(__name__)
@@ -128,23 +128,39 @@ def _asked(asked: tuple[int, ...]) -> str:
     return " ".join(map(str, asked))
 
 
-def train_localiser(x: np.ndarray, y: np.ndarray, hp: Hyper, seed: int, precision: torch.dtype) -> tuple[nn.Module, tuple | None]:
-    """A fresh 1D CNN (location) trained on x (N, n, n, T), y (N, 2) for
+@dataclass(frozen=True)
+class Localiser:
+    """A trained Fig 9 localiser and what feeding it needs: its input
+    normalisation (`preprocess.normalise`'s kind and (mu, sigma)) and the
+    positions' statistics its outputs are standardised by
+    (`train.target_statistics`, a clean location cell's)."""
+
+    model: nn.Module
+    norm: str
+    stats: tuple | None
+    target_stats: tuple
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        """(N, 2) predicted positions (m) of x (N, n, n, T) counts."""
+        out = infer(self.model, torch.from_numpy(np.ascontiguousarray(normalise(x, self.norm, self.stats)[0])))
+        return to_metres(out, self.target_stats)
+
+
+def train_localiser(x: np.ndarray, y: np.ndarray, hp: Hyper, seed: int, precision: torch.dtype) -> Localiser:
+    """A fresh 1D CNN (location) trained on x (N, n, n, T), y (N, 2) m for
     hp.epochs through `train.fit` (the cells' loop and loss, no model
-    selection) in `precision` (`train.training_precision`). Returns the model and its normalisation statistics
-    (`preprocess.normalise`, from x)."""
+    selection) in `precision` (`train.training_precision`). It regresses
+    standardised positions through the bounded head, as the clean protocol's
+    location cells do: in metres its outputs would spend the few epochs
+    learning the workspace's offset from 0 (the rows x 0.9-1.3 m)."""
     torch.manual_seed(seed)
     xn, stats = normalise(x, hp.norm)
+    target_stats = target_statistics("location", "clean", y)
     xt = torch.from_numpy(np.ascontiguousarray(xn))
-    yt = torch.from_numpy(np.ascontiguousarray(y, np.float32))
+    yt = torch.from_numpy(np.ascontiguousarray(standardise(y, target_stats), np.float32))
     model = cnn1d("location", N_LOCATION_OUTPUTS, tuple(x.shape[1:]))
-    fit(model, xt, yt, hp, seed, loss_for("location"), name="fig9 localiser", precision=precision)
-    return model, stats
-
-
-def predict(model: nn.Module, stats: tuple | None, x: np.ndarray, norm: str) -> np.ndarray:
-    """(N, 2) predicted positions (m) of x (N, n, n, T) counts."""
-    return infer(model, torch.from_numpy(np.ascontiguousarray(normalise(x, norm, stats)[0])))
+    fit(model, xt, yt, hp, seed, loss_for("location"), name="fig9 localiser", precision=precision, head=position_head(target_stats))
+    return Localiser(model, hp.norm, stats, target_stats)
 
 
 def bound_to_workspace(pred: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -167,8 +183,8 @@ def workspace(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def score(x_fit: np.ndarray, y_fit: np.ndarray, x_test: np.ndarray, y_test: np.ndarray, hp: Hyper, seed: int, precision: torch.dtype) -> dict:
     """Train a localiser on x_fit, y_fit and its test metrics (predictions bounded to y_fit's box)."""
     t0 = time.perf_counter()
-    model, stats = train_localiser(x_fit, y_fit, hp, seed, precision)
-    m = regression_metrics(bound_to_workspace(predict(model, stats, x_test, hp.norm), *workspace(y_fit)), y_test)
+    localiser = train_localiser(x_fit, y_fit, hp, seed, precision)
+    m = regression_metrics(bound_to_workspace(localiser.predict(x_test), *workspace(y_fit)), y_test)
     log.info("fig9 localiser on %d samples: test RMSE %.4f m (%.1f s)", len(x_fit), m["rmse"], time.perf_counter() - t0)
     return m
 
