@@ -21,8 +21,8 @@ transforms' seed) and per panel (`experiments.fig9.PANELS`), the test RMSE
   error on the real captures is one whose twin teaches the localiser what
   the real zone does not show.
 
-The twins are `results/twin_calibrated`, the real captures the 3x3 light-on
-feature stores that have one (the fit's sets).
+The twins are `results/twin_calibrated`'s of the base objects, the real
+captures the 3x3 light-on feature stores that have one (the fit's sets).
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ import yaml
 
 from denali_pipe.core.capture_sets import parse_set_name
 from denali_pipe.core.floor import kept_bins
+from denali_pipe.core.objects import load_catalogue
 from denali_pipe.experiments import fig9
 from denali_pipe.train.dataset import location_labels
 from denali_pipe.train.metrics import predict_mean_baseline, regression_metrics
@@ -72,7 +73,9 @@ def main() -> None:
     args = p.parse_args()
     cfg = yaml.safe_load(args.configfile.read_text())
     torch.set_num_threads(cfg["train"]["threads"])
-    twins = sorted((args.results / "twin_calibrated").glob("*.zarr"))
+    # Fig 9's sets: the base objects' (a full run also calibrates the variants' twins)
+    base = {name for name, spec in load_catalogue(Path(cfg["objects_sheet"])).items() if spec.variant == "base"}
+    twins = sorted(t for t in (args.results / "twin_calibrated").glob("*.zarr") if t.stem.rsplit("_", 1)[0] in base)
     with_twin = {t.stem for t in twins}
     features = []
     for f in sorted((args.results / "features").glob("*_3x3_lighton.zarr")):
