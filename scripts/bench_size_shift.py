@@ -17,7 +17,10 @@ The validation part is 20 % of the training size's (set, location) capture
 groups, as the clean protocol draws it for this split (`splits.validation_split`):
 it shares the training size, so it cannot show the size shift itself. Each row:
 validation and test RMSE (m), the training-mean predictor's test RMSE, the share
-of test predictions outside the gantry's workspace and the furthest one (m).
+of test predictions outside the gantry's workspace and the furthest one (m), and
+the test errors' mean (`bias_x`, `bias_y`, m) and slope against the true
+coordinate (`slope_x`, `slope_y`): a shift, and a pull toward the middle of
+the training positions when below 0.
 """
 
 from __future__ import annotations
@@ -56,6 +59,15 @@ def model_input(kind: str, x: np.ndarray, train: np.ndarray) -> np.ndarray:
         return normalise(x, kind, stats)[0]
     total = np.abs(x).reshape(len(x), -1).sum(axis=1).reshape(-1, 1, 1, 1)
     return (x * (x[0].size / np.maximum(total, 1e-6))).astype(np.float32)
+
+
+def error_trend(pred: np.ndarray, y: np.ndarray) -> dict:
+    """The errors' (N, 2) mean per coordinate (m) and their slope against the truth y (N, 2) m."""
+    err = pred - y
+    return {
+        **{f"bias_{c}": float(err[:, k].mean()) for k, c in enumerate("xy")},
+        **{f"slope_{c}": float(np.polyfit(y[:, k], err[:, k], 1)[0]) for k, c in enumerate("xy")},
+    }
 
 
 def size_split(samples: pd.DataFrame, train_size: str, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -104,12 +116,19 @@ def main() -> None:
                             "seed": seed, "train": train_size, "input": kind, "targets": targets,
                             "val_rmse": regression_metrics(pv, y[va])["rmse"], "test_rmse": regression_metrics(pt, y[te])["rmse"],
                             "mean_rmse": regression_metrics(np.tile(y[tr].mean(0), (len(te), 1)), y[te])["rmse"],
-                            **workspace_metrics(pt),
+                            **workspace_metrics(pt), **error_trend(pt, y[te]),
                         }
                     )  # fmt: skip
     table = pd.DataFrame(rows)
     print(table.round(3).to_string(index=False))
-    print(table.groupby(["train", "input", "targets"])[["val_rmse", "test_rmse", "outside_workspace", "max_outside_workspace"]].mean().round(3).to_string())
+    print(
+        table.groupby(["train", "input", "targets"])[
+            ["val_rmse", "test_rmse", "outside_workspace", "max_outside_workspace", "bias_x", "bias_y", "slope_x", "slope_y"]
+        ]
+        .mean()
+        .round(3)
+        .to_string()
+    )
 
 
 if __name__ == "__main__":
