@@ -24,8 +24,10 @@ the sets are nested as n grows) and the noise draws. Every model of one seed
 starts from the same weights, so the curves differ by their data alone.
 
 Every model's predictions are bounded to the workspace, the box of its
-training labels (`bound_to_workspace`), so that the raw twins' wild
-extrapolation on real counts stays on the scale of the other errors.
+training labels: the localiser's bounded head keeps them within half a
+gantry step of it (`Localiser`), and `bound_to_workspace` clips that last
+margin, so that raw twins scored on real counts miss by no more than the
+box allows.
 
 Beside the models, the table holds the predict-the-mean baseline as rows of
 their own (fidelity `MEAN_BASELINE`, one per seed, n_real = n_sim = 0: it
@@ -167,11 +169,11 @@ def bound_to_workspace(pred: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.n
     """(N, 2) predicted positions (m) clipped to the box lo..hi, (2,) corners in m.
 
     The gantry only places objects inside its workspace, so an answer outside
-    it is wrong by construction; a model that extrapolates on unfamiliar
-    inputs (raw twins in radiance units, tested on real counts) would
-    otherwise miss by ~1e6 m and dwarf every other error. Pass the box of the
-    model's training labels (`workspace`): data rather than our design
-    drawing, so it also holds on the real release."""
+    it is wrong by construction. The localiser's bounded head already keeps
+    its answers within half a gantry step of its training box; this takes
+    that margin too. Pass the box of the model's training labels
+    (`workspace`): data rather than our design drawing, so it also holds on
+    the real release."""
     return np.clip(pred, lo, hi)
 
 
