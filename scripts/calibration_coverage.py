@@ -9,11 +9,12 @@ the sensor and every object pose moved and turned, its own seed), 12
 gantry locations drawn at random, two objects (A 8 in, circle 4 in), and
 parameters drawn at random under the flood (`draw_truth`: footprints within
 +-1.5 cm and 0.9-1.15x, a time offset, a SPAD pulse, a diffuse share of
-0.05-0.5, emission half widths of 4-15 deg, as narrow as the demo's fit, and
-a receiver glare of 0.5-10 %);
+0.05-0.5, the flood's half widths of 4-15 deg, as narrow as the demo's fit,
+a core of 5-90 % of the on-axis intensity and 1-8 deg, and a receiver glare
+of 0.5-10 %);
 captures the twin renders there with Gaussian noise (`calibrate.planted_captures`,
 `--noise` of the brightest bin); the calibration (`calibrate.calibrate`,
-starting from the design twin, 26 x 20.5 deg) run on them. Printed: the
+starting from the design twin, 26 x 20.5 deg and an even split at 5 deg) run on them. Printed: the
 share of coordinates whose interval (`twin.calibration.level`, 90 %) holds
 the truth, over all of them, over those not flagged `not_identified`, and
 per group (zone footprints; globals: time offset, pulse, share, widths,
@@ -43,7 +44,7 @@ SETTINGS = {
     "wall_albedo": 1.0, "object_albedo": 0.5, "table": False, "table_albedo": 0.5,
     "material": "retroreflective", "retroreflective": {"lobe_width_deg": 10.0, "diffuse_share": 0.3},
     "footprint": {"film": 8, "scale": 1.0},
-    "illumination": "flood", "flood": {"grid": 2, "beam_hwhm_deg": [26.0, 20.5]},
+    "illumination": "flood", "flood": {"grid": 2, "beam_hwhm_deg": [26.0, 20.5], "core_share": 0.5, "core_hwhm_deg": 5.0},
     "calibration": {
         "film": 2, "samples": 10, "validation_fraction": 0.2, "max_captures": 0,
         "bootstrap_resamples": 100, "level": 0.9, "max_evaluations": 200,
@@ -61,7 +62,9 @@ def draw_truth(rng: np.random.Generator) -> np.ndarray:
     share = rng.uniform(0.05, 0.5)
     tail = [rng.uniform(-2, 2), np.log(rng.uniform(0.5, 1.2)), np.log(rng.uniform(1.0, 3.0)), np.log(share / (1 - share))]
     glare = rng.uniform(0.005, 0.1)
-    x[3 * C.ZONES :] = tail + list(np.log(rng.uniform(4.0, 15.0, 2))) + [np.log(glare / (1 - glare))]
+    core = rng.uniform(0.05, 0.9)
+    emission = [*np.log(rng.uniform(4.0, 15.0, 2)), np.log(core / (1 - core)), np.log(rng.uniform(1.0, 8.0))]
+    x[3 * C.ZONES :] = tail + emission + [np.log(glare / (1 - glare))]
     return x
 
 

@@ -15,7 +15,7 @@ from denali_pipe.core import pulse
 from denali_pipe.core.meshes import front_samples, object_mesh
 from denali_pipe.core.pulse import Pulse
 from denali_pipe.twin.analytic import AnalyticRenderer
-from denali_pipe.twin.layout import Flood, Material, load_calibration, nominal_scene, pixel_centres, twin_scene, zone_footprints
+from denali_pipe.twin.layout import Emission, Flood, Material, laser_spot, load_calibration, nominal_scene, pixel_centres, twin_scene, zone_footprints
 from denali_pipe.twin.render import read_twin, render_twin
 
 LOCATIONS = (0, 9, 55, 99)  # near/far from the wall, both ends of the gantry
@@ -31,7 +31,7 @@ SETTINGS = {
     "analytic": {"samples": 60},
     "mitransient": {"variant": "auto", "spp": 4000, "max_depth": 3},
 }
-FLOOD = {**SETTINGS, "illumination": "flood", "flood": {"grid": 3, "beam_hwhm_deg": [26.0, 20.5]}}
+FLOOD = {**SETTINGS, "illumination": "flood", "flood": {"grid": 3, "beam_hwhm_deg": [26.0, 20.5], "core_share": 0.5, "core_hwhm_deg": 5.0}}
 
 
 @pytest.fixture(scope="module")
@@ -109,8 +109,13 @@ def test_retroreflective_lobe_returns_toward_the_spot(cal, catalogue):
     assert ratio(rr) > 1.5 * ratio(lam)
 
 
-def _sum_of_spots(twin, samples, location, points, weights):
-    """The flood's render as the sum of single-spot renders at `points` (M, 3), weighted (M,)."""
+def _sum_of_spots(twin, samples, location, points, solid):
+    """The flood's render as the sum of single-spot renders at `points` (M,
+    3), each lit by intensity x solid angle `solid` (M,) sr (a spot's render
+    is per unit intensity: its weight is solid r^2 / cos)."""
+    rel = points - twin.sensor
+    r = np.linalg.norm(rel, axis=1)
+    weights = solid * r**3 / np.abs(rel @ twin.relays[0].normal)
     out = 0
     for p, w in zip(points, weights):
         out = out + w * AnalyticRenderer(dataclasses.replace(twin, flood=None, spot=p), samples).render(location)
@@ -120,15 +125,15 @@ def _sum_of_spots(twin, samples, location, points, weights):
 @pytest.mark.parametrize("location", [9, 55])
 def test_flood_is_the_sum_of_its_spots_for_a_lambertian_plate(cal, catalogue, location):
     """Light transport is linear: the flood's render of a Lambertian plate
-    is the sum of spot renders at its lit points, each weighted by the
-    emission toward it and its area. Its energy exactly; its shape, seen
+    is the sum of spot renders at its lit points (the flood lobe's grid
+    and the core's spot), each weighted by the light the emission sends it. Its energy exactly; its shape, seen
     through the sensor's pulse (the calibration's starting one), within 5 %
     in every zone: the first leg's spread, binned once per location
     (twin.analytic), leaves up to 11 % before the pulse at location 9, the
     plate nearest the wall."""
     twin = twin_scene(cal, object_mesh(catalogue["A"], "8inch"), FLOOD, film=4, material=Material("lambertian", 0.5))
     flood = AnalyticRenderer(twin, 20).render(location).mean(axis=(1, 2))
-    spots = _sum_of_spots(twin, 20, location, twin.flood.points, twin.flood.intensity(twin.flood.points) * twin.flood.areas).mean(axis=(1, 2))
+    spots = _sum_of_spots(twin, 20, location, *twin.flood.lit()).mean(axis=(1, 2))
     np.testing.assert_allclose(flood.sum(axis=1), spots.sum(axis=1), rtol=1e-9)
     k = pulse.kernel(Pulse(1.0, 1.0), 0.0)
     seen, truth = pulse.convolve(flood, k), pulse.convolve(spots, k)
@@ -147,9 +152,10 @@ def test_flood_retroreflection_is_the_narrow_lobe_limit_of_its_spots(cal, catalo
     points = (lit.centre + t_u[None, :, None] * lit.size[0] * lit.u + t_v[:, None, None] * lit.size[1] * lit.v).reshape(-1, 3)
     areas = np.full(len(points), lit.size[0] * lit.size[1] / len(points))
     twin = twin_scene(cal, object_mesh(catalogue["square"], "8inch"), FLOOD, relays=(centre,), film=3, material=Material("retroreflective", 0.5, 2.0, 0.0))
-    twin = dataclasses.replace(twin, flood=Flood((26.0, 20.5), points, areas, cal.sensor_position, cal.sensor_rotation))
+    lit_patch = Flood(Emission((26.0, 20.5)), points, areas, cal.sensor_position, cal.sensor_rotation, laser_spot(cal), cal.wall.normal)
+    twin = dataclasses.replace(twin, flood=lit_patch)
     flood = AnalyticRenderer(twin, 12).render(55).mean(axis=(0, 1, 2))
-    spots = _sum_of_spots(twin, 12, 55, points, twin.flood.intensity(points) * areas).mean(axis=(0, 1, 2))
+    spots = _sum_of_spots(twin, 12, 55, *lit_patch.lit()).mean(axis=(0, 1, 2))
     assert flood.sum() == pytest.approx(spots.sum(), rel=0.05)
     assert np.linalg.norm(flood - spots) / np.linalg.norm(spots) < 0.15
 
@@ -246,7 +252,7 @@ def test_render_job_writes_the_twin_store(scene_json, catalogue, tmp_path):
     with pytest.raises(KeyError, match="no location 3"):
         t.histogram(3)
     assert not any(p.name.startswith(".") for p in tmp_path.iterdir())
-    assert t.attrs["illumination"] == "spot" and t.attrs["flood_hwhm_deg"] is None
+    assert t.attrs["illumination"] == "spot" and t.attrs["emission"] is None
 
 
 def test_a_flood_twin_store_says_how_it_was_lit(scene_json, catalogue, tmp_path):
@@ -254,7 +260,8 @@ def test_a_flood_twin_store_says_how_it_was_lit(scene_json, catalogue, tmp_path)
     settings = {**FLOOD, "footprint": {"film": 2, "scale": 1.0}, "analytic": {"samples": 20}}
     render_twin(catalogue["circle"], "8inch", scene_json, {"seed": 7, "resolutions": ["3x3"], "twin": settings}, out)
     t = read_twin(out)
-    assert t.attrs["illumination"] == "flood" and t.attrs["flood_hwhm_deg"] == FLOOD["flood"]["beam_hwhm_deg"]
+    assert t.attrs["illumination"] == "flood"
+    assert t.attrs["emission"] == {"hwhm_deg": [26.0, 20.5], "core_share": 0.5, "core_hwhm_deg": 5.0}
     assert (t.histograms["3x3"].sum(axis=-1) > 0).all()
 
 

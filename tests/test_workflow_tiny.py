@@ -22,6 +22,7 @@ from denali_pipe.io.store import open_set
 from denali_pipe.train.conditions import TABLES as CONDITION_TABLES
 from denali_pipe.train.conditions import table_conditions
 from denali_pipe.transforms.sim_to_real import FIDELITIES
+from denali_pipe.twin.calibrate import EMISSION
 from denali_pipe.twin.render import read_twin
 
 pytestmark = pytest.mark.e2e
@@ -444,8 +445,8 @@ def test_twin_calibration(tiny_run):
         assert (lo <= np.asarray(v) + 1e-12).all() and (np.asarray(v) <= hi + 1e-12).all(), k
     names = {f"{k}[{r}, {q}]" for k in ("offset_u", "offset_v", "scale") for r in range(3) for q in range(3)} | set(c["parameters"])
     assert set(c["not_identified"]) <= names and set(c["at_bound"]) <= names
-    # the tiny preset's object is retroreflective, lit by the flood: no lobe width (its narrow limit), the beam's widths
-    assert {"time_offset", "diffuse_share", "beam_hwhm_h_deg", "beam_hwhm_v_deg"} <= set(c["parameters"]) and "lobe_width_deg" not in c["parameters"]
+    # the tiny preset's object is retroreflective, lit by the flood: no lobe width (its narrow limit), the emission's flood and core
+    assert {"time_offset", "diffuse_share", *EMISSION} <= set(c["parameters"]) and "lobe_width_deg" not in c["parameters"]
     assert c["illumination"] == "flood"
     before, after = np.array(c["residual"]["before"]["nl2"]), np.array(c["residual"]["after"]["nl2"])
     assert before.shape == after.shape == (3, 3) and after.mean() < before.mean()
@@ -455,7 +456,9 @@ def test_twin_calibration(tiny_run):
     assert 0 < c["fit"]["evaluations"] <= 20  # the tiny preset's budget
     twins = sorted((tiny_run / "results/twin_calibrated").glob("*.zarr"))
     assert len(twins) == 9 and all(read_twin(p).attrs["calibration"]["sha256"] for p in twins)
-    assert all(read_twin(p).attrs["flood_hwhm_deg"] == [c["parameters"][k] for k in ("beam_hwhm_h_deg", "beam_hwhm_v_deg")] for p in twins)
+    p = c["parameters"]
+    emission = {"hwhm_deg": [p["beam_hwhm_h_deg"], p["beam_hwhm_v_deg"]], "core_share": p["core_share"], "core_hwhm_deg": p["core_hwhm_deg"]}
+    assert all(read_twin(t).attrs["emission"] == emission for t in twins)
 
 
 def test_transforms_and_fig9(tiny_run):

@@ -26,9 +26,10 @@ plane plate cannot shadow itself and nothing else is in the scene, so the
 sum is exact up to quadrature.
 
 Under the sensor's flood (`TwinScene.flood`) every lit wall point p is a
-spot of its own, weighted by the emission toward it; light transport is
-linear, so the render is the sum over them, with two reductions that keep
-its cost near one spot's:
+spot of its own, weighted by the light the emission sends it (the flood
+lobe's grid points and the core's one spot, `layout.Flood.lit`); light
+transport is linear, so the render is the sum over them, with two
+reductions that keep its cost near one spot's:
 
 - the Lambertian part (all of a Lambertian object, the share d of the
   sheeting) sees the lit wall through its irradiance E_o, summed over the
@@ -42,7 +43,9 @@ its cost near one spot's:
   angles), under which the emission and the wall vary little, so
   L_o(o -> x) = (1 - d) rho_o cos_o' L_p(x): the object sends back to
   each wall point x the light x sent it, along 2 |s - x| + 2 |x - o|. The
-  lobe's width then drops out.
+  lobe's width then drops out. A film pixel's light is the emission's mean
+  over the pixel (`layout.Flood.pixel_intensity`): the core can be narrower
+  than a pixel.
 
 Units: radiance per unit laser intensity (the flood's: on its axis), per
 bin; with the spot, the mitransient renderer gives the same numbers (its
@@ -99,26 +102,22 @@ class AnalyticRenderer:
         cos_l = float(-(d_sp @ self.nw) / self.r_sp)
         self.radiance_spot = twin.wall_albedo / np.pi * cos_l / self.r_sp**2
         if twin.flood is not None:
-            lit = twin.flood.points
-            self.r_lit = np.linalg.norm(lit - twin.sensor, axis=1)
-            self.power_lit = self.wall_radiance(lit, self.r_lit) * twin.flood.areas  # radiance x area of each lit point
+            self.lit, solid = twin.flood.lit()
+            self.r_lit = np.linalg.norm(self.lit - twin.sensor, axis=1)
+            self.power_lit = twin.wall_albedo / np.pi * solid  # radiance x area of each lit spot
         self.set_relays(twin.relays)
-
-    def wall_radiance(self, points: np.ndarray, r: np.ndarray) -> np.ndarray:
-        """(M,) radiance of wall points (M, 3) at distance r (M,) from the
-        sensor, lit by the flood."""
-        tw = self.twin
-        cos_l = ((tw.sensor - points) @ self.nw) / r
-        return tw.wall_albedo / np.pi * tw.flood.intensity(points) * np.clip(cos_l, 0, None) / r**2
 
     def set_relays(self, relays) -> None:
         """Render onto these patches from now on (same film): the calibration moves them."""
+        tw = self.twin
         self.relays = tuple(relays)
-        self.x = np.concatenate([pixel_centres(r, self.twin.film).reshape(-1, 3) for r in self.relays])
-        self.r_xs = np.linalg.norm(self.x - self.twin.sensor, axis=1)
+        self.x = np.concatenate([pixel_centres(r, tw.film).reshape(-1, 3) for r in self.relays])
+        self.r_xs = np.linalg.norm(self.x - tw.sensor, axis=1)
         self.xx = np.einsum("pk,pk->p", self.x, self.x)
-        if self.twin.flood is not None:
-            self.radiance_x = self.wall_radiance(self.x, self.r_xs)
+        if tw.flood is not None:  # each film pixel's radiance under the flood: its mean emission, lit at its centre
+            emission = np.concatenate([tw.flood.pixel_intensity(r, tw.film).reshape(-1) for r in self.relays])
+            cos_l = ((tw.sensor - self.x) @ self.nw) / self.r_xs
+            self.radiance_x = tw.wall_albedo / np.pi * emission * np.clip(cos_l, 0, None) / self.r_xs**2
 
     def object_terms(self, location: int) -> tuple:
         """What a location's render needs that no relay patch changes:
@@ -132,7 +131,7 @@ class AnalyticRenderer:
         o = pose.apply(self.points)
         n_o = pose.R @ np.array([0.0, 0.0, -1.0])  # the face's normal, toward the wall
         if tw.flood is not None:
-            d = o[:, None, :] - tw.flood.points[None, :, :]  # (N, M, 3)
+            d = o[:, None, :] - self.lit[None, :, :]  # (N, M, 3)
             r = np.linalg.norm(d, axis=2)
             cos_p, cos_o = (d @ self.nw) / r, -(d @ n_o) / r
             e = self.power_lit[None, :] * np.clip(cos_p, 0, None) * np.clip(cos_o, 0, None) / r**2

@@ -10,10 +10,11 @@ Parameters:
 - with `twin.material: retroreflective`, the object's diffuse share and,
   under the spot, its lobe width (deg; under the flood the lobe's narrow
   limit holds and its width drops out, `twin.analytic`);
-- under `twin.illumination: flood`, the emission's half widths (deg,
-  horizontal and vertical): how much light each part of the wall gets, which
-  sets each zone's retroreflected return against the light every zone's
-  footprint sends the object;
+- under `twin.illumination: flood`, the emission (`layout.Emission`): the
+  flood's half widths (deg, horizontal and vertical), the core's share of
+  the on-axis intensity and its half width (deg): how much light each part
+  of the wall gets, which sets each zone's retroreflected return against
+  the light every zone's footprint sends the object;
 - the receiver's glare share (`core.glare`): the share of all the light
   reaching the receiver that its optics spread over the whole SPAD array,
   so that every zone holds the others' returns at their times. A zone far
@@ -75,13 +76,14 @@ from denali_pipe.core.meshes import object_mesh
 from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.core.pulse import Pulse
 from denali_pipe.twin.analytic import AnalyticRenderer
-from denali_pipe.twin.layout import Calibration, Material, TwinScene, ZoneGeometry, material_of, twin_scene, zone_footprints
+from denali_pipe.twin.layout import Calibration, Emission, Material, TwinScene, ZoneGeometry, material_of, twin_scene, zone_footprints
 
 log = logging.getLogger(__name__)
 
 GRID = 3  # the grid the captures calibrate
 ZONES = GRID * GRID
-CALIBRATION_VERSION = 4  # 4: the receiver's glare; 3: the flood's emission widths; 2: the SPAD pulse (jitter and tail) in place of a Gaussian
+# 5: the emission's core; 4: the receiver's glare; 3: the flood's emission widths; 2: the SPAD pulse (jitter and tail) in place of a Gaussian
+CALIBRATION_VERSION = 5
 PULSE = ("pulse_sigma", "pulse_tail")  # the pulse's parameters, as named in the file
 GLOBALS = ("time_offset", *PULSE)  # the fit coordinates after the zones', before the material's
 # Finite-difference steps of the Jacobian, in the fit's own coordinates (see `_unpack`).
@@ -93,16 +95,20 @@ STEP = 1e-3
 # nl2 by more than 0.004: the twin's mismatch, not the optimiser, sets the fit.
 COST_TOLERANCE = 1e-4
 # Bounds of the fit's coordinates: offsets within +-10 cm, scales 0.3-3x, time offset +-20 bins,
-# the pulse's jitter 0.2-15 bins and tail 0.1-15, lobe 0.5-60 deg, emission half widths 3-90 deg.
+# the pulse's jitter 0.2-15 bins and tail 0.1-15, lobe 0.5-60 deg, the flood's half widths 3-90 deg,
+# the core's 0.3-15 deg (0.3 deg: 3 mm on the wall, a point to every object and footprint).
 OFFSET_CM_BOUND = 10.0
 PULSE_BOUNDS = ((0.2, 15.0), (0.1, 15.0))
 HWHM_BOUNDS_DEG = (3.0, 90.0)
-EMISSION = ("beam_hwhm_h_deg", "beam_hwhm_v_deg")  # the flood's parameters, as named in the file
+CORE_HWHM_BOUNDS_DEG = (0.3, 15.0)
+EMISSION = ("beam_hwhm_h_deg", "beam_hwhm_v_deg", "core_share", "core_hwhm_deg")  # the emission's parameters, as named in the file
 GLARE = "glare_share"  # the receiver's, as named in the file
 # The share of the glare each zone takes: its SPADs' share of the array. The
 # twin takes the 3x3 map's zones as equal SPAD groups; a zone's gain carries
 # what its own footprint's light costs it, not what the glare brings.
 GLARE_SPADS = np.ones(ZONES)
+# A share's logit bounds (the object's diffuse share, the emission's core): 0.25 % to 99.75 %.
+SHARE_LOGIT_BOUNDS = (-6.0, 6.0)
 # The glare share's logit bounds: 1e-4 (none to speak of) to 0.5.
 GLARE_LOGIT_BOUNDS = (-9.2, 0.0)
 
@@ -111,8 +117,8 @@ GLARE_LOGIT_BOUNDS = (-9.2, 0.0)
 class Fitted:
     """A calibration: offsets (3, 3, 2) m, scales (3, 3), time_offset
     (bins), the pulse, gains (3, 3) counts per radiance, material, the
-    illumination it was fitted under, for the flood its emission half
-    widths (deg, horizontal and vertical), and the receiver's glare share."""
+    illumination it was fitted under, for the flood its emission
+    (`layout.Emission`), and the receiver's glare share."""
 
     offsets: np.ndarray
     scales: np.ndarray
@@ -121,7 +127,7 @@ class Fitted:
     gains: np.ndarray
     material: Material
     illumination: str
-    hwhm_deg: tuple[float, float] | None
+    emission: Emission | None
     glare_share: float
 
     def receive(self, hist: np.ndarray) -> np.ndarray:
@@ -154,7 +160,7 @@ class Fitted:
         material = self.material if rr else material_of(settings, False)
         return twin_scene(
             cal, mesh, {**settings, "illumination": self.illumination}, n, zones=self.zones(cal, n), material=material,
-            time_offset_opl=self.time_offset * geo.BIN_WIDTH_OPL, hwhm_deg=self.hwhm_deg,
+            time_offset_opl=self.time_offset * geo.BIN_WIDTH_OPL, emission=self.emission,
         )  # fmt: skip
 
 
@@ -188,29 +194,30 @@ class Model:
         self.meshes = {(name, size): object_mesh(specs[name], size) for (name, size), _ in keys.groupby(["object", "size"], sort=False)}
         self._light(_unpack(initial(settings), settings)[4])  # the design's light, as the fit's first step computes it
 
-    def _light(self, hwhm_deg: tuple[float, float] | None) -> None:
-        """Renderers and object terms under the flood of `hwhm_deg` (None: the spot)."""
+    def _light(self, emission: Emission | None) -> None:
+        """Renderers and object terms under the flood of `emission` (None: the spot)."""
         c = self.settings["calibration"]
         scene = {**self.settings, "footprint": {**self.settings["footprint"], "film": c["film"]}}
         self.renderers = {
-            key: AnalyticRenderer(twin_scene(self.cal, mesh, scene, GRID, hwhm_deg=hwhm_deg), c["samples"], "tent") for key, mesh in self.meshes.items()
+            key: AnalyticRenderer(twin_scene(self.cal, mesh, scene, GRID, emission=emission), c["samples"], "tent") for key, mesh in self.meshes.items()
         }
         self.terms = [
             ((name, size), int(location), self.renderers[(name, size)].object_terms(int(location)))
             for name, size, location in zip(self.keys["object"], self.keys["size"], self.keys["location"])
         ]
-        self.hwhm_deg = hwhm_deg
+        self.emission = emission
 
-    def zone(self, z: int, zones: ZoneGeometry, material: Material, hwhm_deg: tuple[float, float] | None) -> np.ndarray:
+    def zone(self, z: int, zones: ZoneGeometry, material: Material, emission: Emission | None) -> np.ndarray:
         """(N, N_BINS) zone z's twin (mean over its film) for every capture,
-        under the flood of emission half widths `hwhm_deg` (None: the spot)."""
-        if hwhm_deg != self.hwhm_deg:
-            self._light(hwhm_deg)
+        under the flood of `emission` (None: the spot)."""
+        if emission != self.emission:
+            self._light(emission)
         rect = zone_footprints(self.cal, GRID, zones)[z]
         out = []
         for key, location, terms in self.terms:
             r = self.renderers[key]
-            r.set_relays([rect])
+            if r.relays[0] is not rect:  # a renderer renders many captures: its film's emission once per footprint
+                r.set_relays([rect])
             out.append(r.render(location, material, terms)[0].mean(axis=(0, 1)))
         return np.array(out)
 
@@ -241,7 +248,8 @@ def initial(settings: dict) -> np.ndarray:
     `footprint.scale`, time offset 0, the log times of `calibration.pulse`,
     with a retroreflective object the logit diffuse share (and under the
     spot the log lobe width) of `twin.retroreflective`, under the flood the
-    log emission widths of `flood.beam_hwhm_deg`, and the logit of
+    log half widths of `flood.beam_hwhm_deg`, the logit of its `core_share`
+    and the log of its `core_hwhm_deg`, and the logit of
     `calibration.glare_share`."""
     p = settings["calibration"]["pulse"]
     x = [
@@ -255,18 +263,22 @@ def initial(settings: dict) -> np.ndarray:
         d = lobe["diffuse_share"]
         x += ([] if _flood(settings) else [np.log(lobe["lobe_width_deg"])]) + [np.log(d / (1 - d))]
     if _flood(settings):
-        x += list(np.log(settings["flood"]["beam_hwhm_deg"]))
-    g = settings["calibration"]["glare_share"]
-    return np.array(x + [np.log(g / (1 - g))], float)
+        f = settings["flood"]
+        x += [*np.log(f["beam_hwhm_deg"]), _logit(f["core_share"]), np.log(f["core_hwhm_deg"])]
+    return np.array(x + [_logit(settings["calibration"]["glare_share"])], float)
 
 
 def _logistic(v: float) -> float:
     return float(1 / (1 + np.exp(-v)))
 
 
-def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, Material, tuple[float, float] | None, float]:
+def _logit(share: float) -> float:
+    return float(np.log(share / (1 - share)))
+
+
+def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, Material, Emission | None, float]:
     """Fit coordinates -> (zone geometry, time offset bins, pulse, material,
-    the flood's emission half widths (deg) or None under the spot, the glare share).
+    the flood's emission or None under the spot, the glare share).
     Offsets in cm, scales, times and widths as logs, the shares as logits: steps of
     similar effect, and the bounds of the physical parameters hold by construction."""
     off = x[: 2 * ZONES].reshape(GRID, GRID, 2) / 100
@@ -279,8 +291,11 @@ def _unpack(x: np.ndarray, settings: dict) -> tuple[ZoneGeometry, float, Pulse, 
     if _rr(settings):
         width = float(np.exp(tail["lobe_width_deg"])) if "lobe_width_deg" in tail else material.lobe_width_deg
         material = Material("retroreflective", material.albedo, width, _logistic(tail["diffuse_share"]))
-    hwhm = tuple(float(np.exp(tail[k])) for k in EMISSION) if _flood(settings) else None
-    return ZoneGeometry(off, scales), t0, p, material, hwhm, _logistic(tail[GLARE])
+    emission = None
+    if _flood(settings):
+        h, v, share, core = (tail[k] for k in EMISSION)
+        emission = Emission((float(np.exp(h)), float(np.exp(v))), _logistic(share), float(np.exp(core)))
+    return ZoneGeometry(off, scales), t0, p, material, emission, _logistic(tail[GLARE])
 
 
 # The trust-region solver keeps its iterates strictly inside the bounds and
@@ -310,7 +325,14 @@ IDENTIFIED_SPAN = 0.25
 def _bounds(settings: dict) -> tuple[np.ndarray, np.ndarray]:
     lo = [*np.full(2 * ZONES, -OFFSET_CM_BOUND), *np.full(ZONES, np.log(0.3)), -20.0, *np.log([b[0] for b in PULSE_BOUNDS])]
     hi = [*np.full(2 * ZONES, OFFSET_CM_BOUND), *np.full(ZONES, np.log(3.0)), 20.0, *np.log([b[1] for b in PULSE_BOUNDS])]
-    tail = {"lobe_width_deg": np.log([0.5, 60.0]), "diffuse_share": (-6.0, 6.0), **dict.fromkeys(EMISSION, np.log(HWHM_BOUNDS_DEG)), GLARE: GLARE_LOGIT_BOUNDS}
+    tail = {
+        "lobe_width_deg": np.log([0.5, 60.0]),
+        "diffuse_share": SHARE_LOGIT_BOUNDS,
+        **dict.fromkeys(EMISSION[:2], np.log(HWHM_BOUNDS_DEG)),
+        "core_share": SHARE_LOGIT_BOUNDS,
+        "core_hwhm_deg": np.log(CORE_HWHM_BOUNDS_DEG),
+        GLARE: GLARE_LOGIT_BOUNDS,
+    }
     for name in tail_names(settings)[len(GLOBALS) :]:
         lo.append(tail[name][0])
         hi.append(tail[name][1])
@@ -376,20 +398,20 @@ class Problem:
         self.y = self.y - self.offsets[..., None] * self.kept
         self.cache.clear()
 
-    def zone_twin(self, z: int, zones: ZoneGeometry, material: Material, hwhm_deg) -> np.ndarray:
-        key = (z, *zones.offsets[divmod(z, GRID)].round(12), round(float(zones.scales[divmod(z, GRID)]), 12), material, hwhm_deg)
+    def zone_twin(self, z: int, zones: ZoneGeometry, material: Material, emission: Emission | None) -> np.ndarray:
+        key = (z, *zones.offsets[divmod(z, GRID)].round(12), round(float(zones.scales[divmod(z, GRID)]), 12), material, emission)
         if key not in self.cache:
             if len(self.cache) > 4 * ZONES:
                 self.cache.clear()
-            self.cache[key] = self.model.zone(z, zones, material, hwhm_deg)
+            self.cache[key] = self.model.zone(z, zones, material, emission)
         return self.cache[key]
 
     def twins(self, x: np.ndarray) -> np.ndarray:
         """(N, Z, T) the twins blurred by the pulse, in the real bins the
         captures keep (0 in the others, as the preprocessing left the
         captures), before the gains."""
-        zones, t0, p, material, hwhm, _ = _unpack(x, self.settings)
-        h = np.stack([self.zone_twin(z, zones, material, hwhm) for z in range(ZONES)], axis=1)
+        zones, t0, p, material, emission, _ = _unpack(x, self.settings)
+        h = np.stack([self.zone_twin(z, zones, material, emission) for z in range(ZONES)], axis=1)
         return pulse.convolve(h, pulse.kernel(p, t0))[..., self.crop : self.crop + self.T] * self.kept
 
     def gains(self, m: np.ndarray, share: float) -> np.ndarray:
@@ -479,9 +501,11 @@ def at_bound(x: np.ndarray, settings: dict, interval: np.ndarray | None = None) 
 def to_physical(x: np.ndarray, settings: dict) -> dict:
     """The fit coordinates as the named physical parameters: the zones'
     footprints, `GLOBALS`, the material's lobe, the flood's emission and the glare (`tail_names`)."""
-    zones, t0, p, material, hwhm, share = _unpack(x, settings)
+    zones, t0, p, material, emission, share = _unpack(x, settings)
     tail = {"time_offset": t0, **dict(zip(PULSE, (p.sigma_bins, p.fast_tail_bins)))}
-    tail |= {"lobe_width_deg": material.lobe_width_deg, "diffuse_share": material.diffuse_share, **dict(zip(EMISSION, hwhm or ())), GLARE: share}
+    tail |= {"lobe_width_deg": material.lobe_width_deg, "diffuse_share": material.diffuse_share, GLARE: share}
+    if emission is not None:
+        tail |= dict(zip(EMISSION, (*emission.hwhm_deg, emission.core_share, emission.core_hwhm_deg)))
     out = {"offset_u": zones.offsets[..., 0], "offset_v": zones.offsets[..., 1], "scale": zones.scales}
     return out | {k: tail[k] for k in tail_names(settings)}
 
@@ -707,7 +731,7 @@ def write_calibration(path: Path, result: Result, settings: dict, record: dict) 
             "pulse_tail": "bins",
             "lobe_width_deg": "deg",
             "diffuse_share": "1",
-            **dict.fromkeys(EMISSION, "deg"),
+            **dict(zip(EMISSION, ("deg", "deg", "1", "deg"))),
             GLARE: "1",
         },
         "se": result.se,
@@ -739,9 +763,11 @@ def read_calibration(path: Path) -> Fitted:
         lobe = {**d["fixed"], **{k: p[k] for k in ("lobe_width_deg", "diffuse_share") if k in p}}
         material = material_of({"material": d["material"], "object_albedo": d["object_albedo"], "retroreflective": lobe})
         pulse_of = Pulse(*(float(p[k]) for k in PULSE))
-        hwhm = tuple(float(p[k]) for k in EMISSION) if d["illumination"] == "flood" else None
+        emission = None
+        if d["illumination"] == "flood":
+            emission = Emission((float(p["beam_hwhm_h_deg"]), float(p["beam_hwhm_v_deg"])), float(p["core_share"]), float(p["core_hwhm_deg"]))
         return Fitted(
-            offsets, np.asarray(p["scale"], float), float(p["time_offset"]), pulse_of, np.asarray(d["gains"], float), material, d["illumination"], hwhm,
+            offsets, np.asarray(p["scale"], float), float(p["time_offset"]), pulse_of, np.asarray(d["gains"], float), material, d["illumination"], emission,
             float(p[GLARE]),
         )  # fmt: skip
     except (OSError, KeyError, TypeError, ValueError) as e:

@@ -204,38 +204,113 @@ def three_bounce_lead(cal: Calibration, n: int, plate_size: float) -> np.ndarray
 
 
 @dataclass(frozen=True)
-class Flood:
-    """The sensor's flood illumination: relative radiant intensity
-    exp(-ln 2 [(a_h / hwhm_h)^2 + (a_v / hwhm_v)^2]) toward a direction at
-    angles a_h, a_v (deg) from the sensor's axis across and along its field
-    (1 on the axis; `hwhm_deg` (2,) the half widths at half maximum).
+class Emission:
+    """The sensor's emission over its field, two lobes on its axis: relative
+    radiant intensity toward angles a_h, a_v (deg) from the axis across and
+    along the field,
 
-    points (M, 3) and areas (M,) m^2: the lit wall, sampled as a `grid` x
-    `grid` film over each design 3x3 zone footprint (the field the VCSEL
-    lights is the field the zones see). sensor_rotation (3, 3): sensor ->
-    world, OpenCV axes."""
+        E = (1 - c) G(a_h / w_h, a_v / w_v) + c G(a_h / w_c, a_v / w_c),
+        G(x, y) = exp(-ln 2 (x^2 + y^2)),
+
+    1 on the axis. The flood (half widths at half maximum `hwhm_deg` (w_h,
+    w_v)) is the light the VCSEL package's microlens array spreads over the
+    field; the core (round, `core_hwhm_deg` w_c) the light that leaves it
+    unspread, with the VCSEL's own divergence; `core_share` c its part of
+    the on-axis intensity. A single elliptical Gaussian, or any product of a
+    horizontal and a vertical profile, makes the centre zone's light over an
+    edge zone's equal an edge zone's over a corner's; the real sensor's zone
+    means have 2.46 against 1.38 (docs/twin.md)."""
 
     hwhm_deg: tuple[float, float]
+    core_share: float = 0.0
+    core_hwhm_deg: float = 1.0
+
+    def flood(self, a_h: np.ndarray, a_v: np.ndarray) -> np.ndarray:
+        """The flood lobe's part of the intensity toward (a_h, a_v) deg."""
+        return (1 - self.core_share) * np.exp(-np.log(2) * ((a_h / self.hwhm_deg[0]) ** 2 + (a_v / self.hwhm_deg[1]) ** 2))
+
+    def core(self, a_h: np.ndarray, a_v: np.ndarray) -> np.ndarray:
+        """The core lobe's part of the intensity toward (a_h, a_v) deg."""
+        return self.core_share * np.exp(-np.log(2) * (a_h**2 + a_v**2) / self.core_hwhm_deg**2)
+
+    def core_solid_angle(self) -> float:
+        """The core's intensity integrated over directions (sr, per unit of
+        on-axis intensity): c pi w_c^2 / ln 2, w_c in radians (a few degrees:
+        the small-angle integral is exact to well under 1 %)."""
+        return self.core_share * np.pi * np.deg2rad(self.core_hwhm_deg) ** 2 / np.log(2)
+
+
+# The spacing, in core half widths, of the sub-samples over which a film
+# pixel's mean emission is taken (`Flood.pixel_intensity`): at 0.5 the mean
+# of a Gaussian over a pixel is within 1 % (tests/test_twin_layout.py).
+SUBSAMPLE_SPACING = 0.5
+
+
+@dataclass(frozen=True)
+class Flood:
+    """The sensor's flood illumination of the wall, `emission` (`Emission`)
+    about the sensor's axis.
+
+    points (M, 3) and areas (M,) m^2: the lit wall the flood lobe lights,
+    sampled as a `grid` x `grid` film over each design 3x3 zone footprint
+    (the field the VCSEL lights is the field the zones see). The core, a few
+    degrees wide (a few cm on the wall, seen from an object tens of cm away),
+    lights the wall as one spot: `axis_point` (3,), where the sensor's axis
+    meets the wall. sensor_rotation (3, 3): sensor -> world, OpenCV axes;
+    wall_normal (3,): the wall's unit normal."""
+
+    emission: Emission
     points: np.ndarray
     areas: np.ndarray
     sensor: np.ndarray
     sensor_rotation: np.ndarray
+    axis_point: np.ndarray
+    wall_normal: np.ndarray
+
+    def angles(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(a_h, a_v) deg of world points (..., 3) from the sensor's axis."""
+        d = (points - self.sensor) @ self.sensor_rotation  # into the sensor's frame: x right, y down, z forward
+        return np.rad2deg(np.arctan2(d[..., 0], d[..., 2])), np.rad2deg(np.arctan2(d[..., 1], d[..., 2]))
 
     def intensity(self, points: np.ndarray) -> np.ndarray:
-        """(...,) relative intensity toward world points (..., 3)."""
-        d = (points - self.sensor) @ self.sensor_rotation  # into the sensor's frame: x right, y down, z forward
-        a_h = np.rad2deg(np.arctan2(d[..., 0], d[..., 2])) / self.hwhm_deg[0]
-        a_v = np.rad2deg(np.arctan2(d[..., 1], d[..., 2])) / self.hwhm_deg[1]
-        return np.exp(-np.log(2) * (a_h**2 + a_v**2))
+        """(...,) relative intensity, both lobes, toward world points (..., 3)."""
+        a = self.angles(points)
+        return self.emission.flood(*a) + self.emission.core(*a)
+
+    def lit(self) -> tuple[np.ndarray, np.ndarray]:
+        """The lit wall as spots: points (M + 1, 3) and the light each gets,
+        intensity x solid angle (M + 1,) sr per unit on-axis intensity: the
+        flood lobe at its grid points (intensity x area x cos / r^2), then
+        the core's whole light at the axis point."""
+        rel = self.points - self.sensor
+        r = np.linalg.norm(rel, axis=1)
+        solid = self.areas * np.abs(rel @ self.wall_normal) / r**3
+        flood = self.emission.flood(*self.angles(self.points)) * solid
+        return np.vstack([self.points, self.axis_point]), np.append(flood, self.emission.core_solid_angle())
+
+    def pixel_intensity(self, relay: Rect, film: int) -> np.ndarray:
+        """(film, film) the emission's mean over each film pixel of `relay`
+        (`pixel_centres`' order): the core is narrower than a calibration
+        pixel, and its value at the centre would swing with a pixel's place."""
+        pixel_deg = np.rad2deg(max(relay.size) / film / np.linalg.norm(relay.centre - self.sensor))
+        k = max(1, int(np.ceil(pixel_deg / (SUBSAMPLE_SPACING * self.emission.core_hwhm_deg))))
+        sub = pixel_centres(relay, film * k)
+        return self.intensity(sub).reshape(film, k, film, k).mean(axis=(1, 3))
 
 
-def flood(cal: Calibration, hwhm_deg, grid: int) -> Flood:
-    """The flood of emission half widths `hwhm_deg` (h, v) over the design
-    3x3 footprints, each sampled at `grid` x `grid` points."""
+def flood(cal: Calibration, emission: Emission, grid: int) -> Flood:
+    """The flood of `emission` over the design 3x3 footprints, each sampled
+    at `grid` x `grid` points."""
     feet = zone_footprints(cal, 3)
     points = np.concatenate([pixel_centres(r, grid).reshape(-1, 3) for r in feet])
     areas = np.concatenate([np.full(grid * grid, r.size[0] * r.size[1] / grid**2) for r in feet])
-    return Flood(tuple(float(v) for v in hwhm_deg), points, areas, cal.sensor_position, cal.sensor_rotation)
+    return Flood(emission, points, areas, cal.sensor_position, cal.sensor_rotation, laser_spot(cal), cal.wall.normal)
+
+
+def emission_of(twin: dict) -> Emission:
+    """The design emission of the config's `twin.flood`."""
+    f = twin["flood"]
+    return Emission(tuple(float(v) for v in f["beam_hwhm_deg"]), float(f["core_share"]), float(f["core_hwhm_deg"]))
 
 
 def zone_footprint(cal: Calibration, scale: float = 1.0) -> Rect:
@@ -356,20 +431,20 @@ def twin_scene(
     film: int | None = None,
     material: Material | None = None,
     time_offset_opl: float = 0.0,
-    hwhm_deg: tuple[float, float] | None = None,
+    emission: Emission | None = None,
 ) -> TwinScene:
     """The twin of one object mesh from the calibration and the config's
     `twin` section (footprint, albedos, material, table, illumination), with one film per
     zone of the n x n grid (`zone_footprints` of `zones`, the design FoV
     scaled by `footprint.scale` when None). `relays`/`film` override the
     patches and their film (the benchmark's whole-wall film); `material`
-    the configured one (`material_of`); `hwhm_deg` the flood's configured
-    emission widths (`flood.beam_hwhm_deg`). No illumination set: the paper's spot."""
+    the configured one (`material_of`); `emission` the flood's configured
+    one (`emission_of`). No illumination set: the paper's spot."""
     illumination = twin.get("illumination", "spot")
     check_illumination(illumination)
     lit = None
     if illumination == "flood":
-        lit = flood(cal, twin["flood"]["beam_hwhm_deg"] if hwhm_deg is None else hwhm_deg, twin["flood"]["grid"])
+        lit = flood(cal, emission or emission_of(twin), twin["flood"]["grid"])
     vertices, faces = front_face(mesh)
     if relays is None:
         relays = tuple(zone_footprints(cal, n, zones or ZoneGeometry.nominal(n, twin["footprint"]["scale"])))

@@ -19,8 +19,8 @@ resolutions, renderer, config (the `twin` settings used), material,
 calibration (twin_calibration.json's path and sha256, or None for the
 design geometry), seed, bin_width_opl, start_opl, time_offset_opl,
 footprints ({grid: [centre, u, v, size] per zone}), laser_spot, sensor,
-illumination ("spot" or "flood") and flood_hwhm_deg (the flood's emission
-half widths, deg, horizontal and vertical; None under the spot),
+illumination ("spot" or "flood") and emission (the flood's `layout.Emission`
+as a dict: hwhm_deg (h, v), core_share, core_hwhm_deg; None under the spot),
 glare_share (the receiver's, from the calibration; None for the design),
 scene_json (path and sha256), seconds (wall time per location, all grids).
 
@@ -32,7 +32,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -131,7 +131,7 @@ def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out
         "footprints": footprints,
         "laser_spot": twin.spot.tolist(),
         "illumination": "spot" if twin.flood is None else "flood",
-        "flood_hwhm_deg": None if twin.flood is None else list(twin.flood.hwhm_deg),
+        "emission": None if twin.flood is None else asdict(twin.flood.emission),
         "glare_share": fitted.glare_share if fitted else None,
         "sensor": twin.sensor.tolist(),
         "scene_json": _sha(scene_json),
