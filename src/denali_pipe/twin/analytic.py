@@ -54,12 +54,14 @@ projector is set to unit intensity).
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from scipy.ndimage import convolve1d
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.meshes import front_samples
-from denali_pipe.twin.layout import Material, TwinScene, pixel_centres
+from denali_pipe.twin.layout import Flood, Material, TwinScene, pixel_centres
 
 FILTERS = ("box", "tent")
 # Half width (bins) of the flood's first-leg spread kernel. On the demo's
@@ -101,11 +103,18 @@ class AnalyticRenderer:
         self.r_sp = float(np.linalg.norm(d_sp))
         cos_l = float(-(d_sp @ self.nw) / self.r_sp)
         self.radiance_spot = twin.wall_albedo / np.pi * cos_l / self.r_sp**2
-        if twin.flood is not None:
-            self.lit, solid = twin.flood.lit()
-            self.r_lit = np.linalg.norm(self.lit - twin.sensor, axis=1)
-            self.power_lit = twin.wall_albedo / np.pi * solid  # radiance x area of each lit spot
-        self.set_relays(twin.relays)
+        self.relays = tuple(twin.relays)
+        self.set_light(twin.flood)
+
+    def set_light(self, flood: Flood | None) -> None:
+        """Light the wall with `flood` from now on (None: the spot alone):
+        the calibration changes the emission, not the object's quadrature."""
+        tw = self.twin = dataclasses.replace(self.twin, flood=flood)
+        if flood is not None:
+            self.lit, solid = flood.lit()
+            self.r_lit = np.linalg.norm(self.lit - tw.sensor, axis=1)
+            self.power_lit = tw.wall_albedo / np.pi * solid  # radiance x area of each lit spot
+        self.set_relays(self.relays)
 
     def set_relays(self, relays) -> None:
         """Render onto these patches from now on (same film): the calibration moves them."""

@@ -76,7 +76,7 @@ from denali_pipe.core.meshes import object_mesh
 from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.core.pulse import Pulse
 from denali_pipe.twin.analytic import AnalyticRenderer
-from denali_pipe.twin.layout import Calibration, Emission, Material, TwinScene, ZoneGeometry, material_of, twin_scene, zone_footprints
+from denali_pipe.twin.layout import Calibration, Emission, Material, TwinScene, ZoneGeometry, flood, material_of, twin_scene, zone_footprints
 
 log = logging.getLogger(__name__)
 
@@ -192,15 +192,19 @@ class Model:
     def __init__(self, cal: Calibration, specs: dict, keys: pd.DataFrame, settings: dict):
         self.cal, self.settings, self.keys = cal, settings, keys
         self.meshes = {(name, size): object_mesh(specs[name], size) for (name, size), _ in keys.groupby(["object", "size"], sort=False)}
-        self._light(_unpack(initial(settings), settings)[4])  # the design's light, as the fit's first step computes it
+        c = settings["calibration"]
+        scene = {**settings, "footprint": {**settings["footprint"], "film": c["film"]}}
+        design = _unpack(initial(settings), settings)[4]  # the design's light, as the fit's first step computes it
+        self.renderers = {key: AnalyticRenderer(twin_scene(cal, mesh, scene, GRID, emission=design), c["samples"], "tent") for key, mesh in self.meshes.items()}
+        self._light(design)
 
     def _light(self, emission: Emission | None) -> None:
-        """Renderers and object terms under the flood of `emission` (None: the spot)."""
-        c = self.settings["calibration"]
-        scene = {**self.settings, "footprint": {**self.settings["footprint"], "film": c["film"]}}
-        self.renderers = {
-            key: AnalyticRenderer(twin_scene(self.cal, mesh, scene, GRID, emission=emission), c["samples"], "tent") for key, mesh in self.meshes.items()
-        }
+        """Every renderer lit by the flood of `emission` (None: the spot, as
+        built), and the object terms under it."""
+        if emission is not None:
+            lit = flood(self.cal, emission, self.settings["flood"]["grid"])
+            for r in self.renderers.values():
+                r.set_light(lit)
         self.terms = [
             ((name, size), int(location), self.renderers[(name, size)].object_terms(int(location)))
             for name, size, location in zip(self.keys["object"], self.keys["size"], self.keys["location"])
