@@ -216,7 +216,7 @@ class Emission:
     w_v)) is the light the VCSEL package's microlens array spreads over the
     field; the core (round, `core_hwhm_deg` w_c) the light that leaves it
     unspread, with the VCSEL's own divergence; `core_share` c its part of
-    the on-axis intensity. A single elliptical Gaussian, or any product of a
+    the on-axis intensity (the default, 0: the flood alone). A single elliptical Gaussian, or any product of a
     horizontal and a vertical profile, makes the centre zone's light over an
     edge zone's equal an edge zone's over a corner's; the real sensor's zone
     means have 2.46 against 1.38 (docs/twin.md)."""
@@ -293,7 +293,7 @@ class Flood:
         (`pixel_centres`' order): the core is narrower than a calibration
         pixel, and its value at the centre would swing with a pixel's place."""
         pixel_deg = np.rad2deg(max(relay.size) / film / np.linalg.norm(relay.centre - self.sensor))
-        k = max(1, int(np.ceil(pixel_deg / (SUBSAMPLE_SPACING * self.emission.core_hwhm_deg))))
+        k = max(1, int(np.ceil(pixel_deg / (SUBSAMPLE_SPACING * self.emission.core_hwhm_deg)))) if self.emission.core_share > 0 else 1
         sub = pixel_centres(relay, film * k)
         return self.intensity(sub).reshape(film, k, film, k).mean(axis=(1, 3))
 
