@@ -196,15 +196,17 @@ class Model:
         scene = {**settings, "footprint": {**settings["footprint"], "film": c["film"]}}
         design = _unpack(initial(settings), settings)[4]  # the design's light, as the fit's first step computes it
         self.renderers = {key: AnalyticRenderer(twin_scene(cal, mesh, scene, GRID, emission=design), c["samples"], "tent") for key, mesh in self.meshes.items()}
-        self._light(design)
+        self._object_terms(design)
 
-    def _light(self, emission: Emission | None) -> None:
-        """Every renderer lit by the flood of `emission` (None: the spot, as
-        built), and the object terms under it."""
-        if emission is not None:
-            lit = flood(self.cal, emission, self.settings["flood"]["grid"])
-            for r in self.renderers.values():
-                r.set_light(lit)
+    def _light(self, emission: Emission) -> None:
+        """Every renderer lit by the flood of `emission`, and the object terms under it."""
+        lit = flood(self.cal, emission, self.settings["flood"]["grid"])
+        for r in self.renderers.values():
+            r.set_light(lit)
+        self._object_terms(emission)
+
+    def _object_terms(self, emission: Emission | None) -> None:
+        """The object terms of every capture under the renderers' light, `emission` (None: the spot)."""
         self.terms = [
             ((name, size), int(location), self.renderers[(name, size)].object_terms(int(location)))
             for name, size, location in zip(self.keys["object"], self.keys["size"], self.keys["location"])
@@ -264,8 +266,7 @@ def initial(settings: dict) -> np.ndarray:
     ]
     if _rr(settings):
         lobe = settings["retroreflective"]
-        d = lobe["diffuse_share"]
-        x += ([] if _flood(settings) else [np.log(lobe["lobe_width_deg"])]) + [np.log(d / (1 - d))]
+        x += ([] if _flood(settings) else [np.log(lobe["lobe_width_deg"])]) + [_logit(lobe["diffuse_share"])]
     if _flood(settings):
         f = settings["flood"]
         x += [*np.log(f["beam_hwhm_deg"]), _logit(f["core_share"]), np.log(f["core_hwhm_deg"])]
