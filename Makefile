@@ -47,9 +47,12 @@ explore: setup
 
 setup: $(STAMP) debs
 
+# --no-compile: pip's byte-compiling of every installed module (torch's
+# thousands) is 50 of a fresh install's 120 s; Python compiles the few
+# modules a run imports on first use instead.
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || python3 -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet --no-compile -e '.[test]'
 	touch $@
 
 debs:
