@@ -190,7 +190,7 @@ def test_8x8_follows_the_3x3_fit(cal):
 
 def test_at_bound_names_the_pinned_coordinates():
     x = C.initial(SETTINGS)
-    x[0], x[3], x[20], x[27], x[29] = C.OFFSET_CM_BOUND, -C.OFFSET_CM_BOUND, np.log(3.0), -20.0, np.log(15.0)
+    x[0], x[3], x[20], x[27], x[29] = C.OFFSET_CM_BOUND, -C.OFFSET_CM_BOUND, np.log(C.SCALE_BOUNDS[1]), -C.TIME_OFFSET_BOUND_BINS, np.log(15.0)
     assert C.at_bound(x, SETTINGS) == ["offset_u[0, 0]", "offset_v[0, 1]", "scale[0, 2]", "time_offset", "pulse_tail"]
     assert C.at_bound(C.initial(SETTINGS), SETTINGS) == []
     # where the solver stops when pushed against a bound: just inside it

@@ -103,7 +103,7 @@ def twin_rows(path: Path) -> list[dict]:
     """Twin calibration coordinates pinned at a bound; the fit stopped at its budget."""
     status = read_fit_status(path)
     return [
-        _row("twin coordinate at its bound", list(status.at_bound), status.n_coordinates, "twin.calibration (bounds: twin/calibrate.py OFFSET_CM_BOUND, PULSE_BOUNDS, HWHM_BOUNDS_DEG)",
+        _row("twin coordinate at its bound", list(status.at_bound), status.n_coordinates, "twin.calibration (bounds: twin/calibrate.py _bounds)",
              "twin_calibration.json's at_bound: within 0.1 % of the coordinate's range of a bound"),
         _row("twin calibration stopped by its budget", [] if status.converged else [f"twin calibration ({status.evaluations} evaluations)"], 1,
              "twin.calibration.max_evaluations", "twin_calibration.json's fit.converged false: the fit ran out of evaluations"),

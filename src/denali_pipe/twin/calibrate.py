@@ -98,6 +98,8 @@ COST_TOLERANCE = 1e-4
 # the pulse's jitter 0.2-15 bins and tail 0.1-15, lobe 0.5-60 deg, the flood's half widths 3-90 deg,
 # the core's 0.3-15 deg (0.3 deg: 3 mm on the wall, a point to every object and footprint).
 OFFSET_CM_BOUND = 10.0
+SCALE_BOUNDS = (0.3, 3.0)
+TIME_OFFSET_BOUND_BINS = 20.0
 PULSE_BOUNDS = ((0.2, 15.0), (0.1, 15.0))
 HWHM_BOUNDS_DEG = (3.0, 90.0)
 CORE_HWHM_BOUNDS_DEG = (0.3, 15.0)
@@ -328,8 +330,8 @@ IDENTIFIED_SPAN = 0.25
 
 
 def _bounds(settings: dict) -> tuple[np.ndarray, np.ndarray]:
-    lo = [*np.full(2 * ZONES, -OFFSET_CM_BOUND), *np.full(ZONES, np.log(0.3)), -20.0, *np.log([b[0] for b in PULSE_BOUNDS])]
-    hi = [*np.full(2 * ZONES, OFFSET_CM_BOUND), *np.full(ZONES, np.log(3.0)), 20.0, *np.log([b[1] for b in PULSE_BOUNDS])]
+    lo = [*np.full(2 * ZONES, -OFFSET_CM_BOUND), *np.full(ZONES, np.log(SCALE_BOUNDS[0])), -TIME_OFFSET_BOUND_BINS, *np.log([b[0] for b in PULSE_BOUNDS])]
+    hi = [*np.full(2 * ZONES, OFFSET_CM_BOUND), *np.full(ZONES, np.log(SCALE_BOUNDS[1])), TIME_OFFSET_BOUND_BINS, *np.log([b[1] for b in PULSE_BOUNDS])]
     tail = {
         "lobe_width_deg": np.log([0.5, 60.0]),
         "diffuse_share": SHARE_LOGIT_BOUNDS,
