@@ -14,12 +14,11 @@ measured against them, are lower bounds there (marked *).
 
 Per zone, the real capture and the rig's expected counts (the design
 scene, the 8 in hexagon at location 84, lights off as the figure's centre
-floor of 1.6 % of its peak says): the bin where the direct return first
-reaches half its height above the floor, relative to the centre zone's; its
-width above half; the tail, the mean height above the floor 5-14 and 15-29
-bins after the peak, over the peak's; the last 18 bins over the floor
-before the return; and the near-field return's excess over the floor
-(bins 12-18, ~38 bins before the direct return) over the direct peak.
+floor of 1.6 % of its peak says), measured by `rig.measure.zone_shape`: the
+bin where the direct return first reaches half its height above the floor
+(relative to the centre zone's here), its width above half, its tails, the
+late floor and the near-field return. `report.paper.REAL_FIGURE_ZONES`
+records the real readings.
 """
 
 from __future__ import annotations
@@ -34,6 +33,7 @@ import yaml
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.objects import load_catalogue
 from denali_pipe.rig import histograms as H
+from denali_pipe.rig.measure import zone_shape
 from denali_pipe.rig.scene import design_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -44,9 +44,6 @@ GRID = (slice(800, 1300), slice(50, 860))
 PANEL_COLUMNS = ((18, 253), (285, 520), (551, 786))
 PANEL_ROWS = ((0, 170), (185, 330), (345, 490))
 CLIPPED = {0, 1}  # pixels 1 and 2: their tops lie under the figure's label
-FLOOR_BINS = slice(0, 12)
-NEAR_FIELD = slice(12, 19)
-LATE_BINS = 18
 
 
 def panels(figure: Path) -> np.ndarray:
@@ -67,22 +64,6 @@ def panels(figure: Path) -> np.ndarray:
     return np.asarray(out)
 
 
-def shape(h: np.ndarray) -> dict:
-    """One zone's readings (see the module docstring)."""
-    floor = np.median(h[FLOOR_BINS])
-    above = h - floor
-    peak = int(np.argmax(above))
-    half = np.nonzero(above >= 0.5 * above[peak])[0]
-    return {
-        "half rise": int(half[0]),
-        "width": int(half[-1] - half[0] + 1),
-        "tail 5-14": above[peak + 5 : peak + 15].mean() / above[peak],
-        "tail 15-29": above[peak + 15 : peak + 30].mean() / above[peak],
-        "late / floor": h[-LATE_BINS:].mean() / floor,
-        "near field": (h[NEAR_FIELD].max() - floor) / above[peak],
-    }
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--figure", type=Path, default=FIGURE)
@@ -94,13 +75,13 @@ def main() -> None:
     rig = H.expected_counts("3x3", False, scene, phot).reshape(9, -1)
     real = panels(args.figure)
     centre = 4
-    rows = {"real": [shape(h) for h in real], "rig": [shape(h) for h in rig]}
+    rows = {"real": [zone_shape(h) for h in real], "rig": [zone_shape(h) for h in rig]}
     for source, zones in rows.items():
         print(source)
         for key in zones[0]:
-            values = [z[key] - zones[centre][key] if key == "half rise" else z[key] for z in zones]
-            marks = ["*" if source == "real" and i in CLIPPED and key not in ("half rise", "late / floor") else " " for i in range(9)]
-            print(f"  {key:12s}" + "".join(f"{v:8.3g}{m}" for v, m in zip(values, marks)))
+            values = [z[key] - zones[centre][key] if key == "half_rise" else z[key] for z in zones]
+            marks = ["*" if source == "real" and i in CLIPPED and key not in ("half_rise", "late_over_floor") else " " for i in range(9)]
+            print(f"  {key:16s}" + "".join(f"{v:8.3g}{m}" for v, m in zip(values, marks)))
 
 
 if __name__ == "__main__":

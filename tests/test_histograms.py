@@ -9,7 +9,7 @@ from denali_pipe.core import geometry as geo
 from denali_pipe.core.meshes import front_samples, object_mesh, sample_spacing
 from denali_pipe.report import paper
 from denali_pipe.rig import histograms as H
-from denali_pipe.rig.measure import early_share, measure
+from denali_pipe.rig.measure import early_share, measure, zone_shape
 from denali_pipe.rig.scene import design_scene, mount_scatterer, object_scatterer
 
 
@@ -272,6 +272,20 @@ def test_column_0_holds_the_latest_broadest_direct_returns_like_the_release(phot
     assert np.all(broad[:, 0] > broad[:, 2])
     # and the rows are not mirrored: the bottom row's returns come later
     assert peak[2].sum() > peak[0].sum()
+
+
+def test_every_zone_rises_when_and_lasts_as_long_as_the_release_capture(phot, mid_scene):
+    # capture_setup.png's nine panels read bar by bar (paper.REAL_FIGURE_ZONES:
+    # its hexagon at about location 84, lights off): where each zone's direct
+    # return reaches half its height, against the centre's, and how many bins
+    # it stays above half. The sensor's pose and field, the zones' tiling, the
+    # pulse and the combiner's saturation set both.
+    shapes = [zone_shape(h) for h in H.expected_counts("3x3", False, mid_scene("hexagon", "8inch", 84), phot).reshape(9, -1)]
+    rise = np.array([s["half_rise"] for s in shapes])
+    assert np.abs((rise - rise[4]) - paper.REAL_FIGURE_ZONES["half_rise"]).max() <= 3
+    real = np.array(paper.REAL_FIGURE_ZONES["width"])
+    read = ~np.isnan(real)
+    assert np.abs(np.array([s["width"] for s in shapes])[read] - real[read]).max() <= 2
 
 
 def test_far_column_holds_the_bright_zones_return_early_by_glare(phot):

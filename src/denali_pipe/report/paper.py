@@ -77,6 +77,22 @@ REAL_CENTRE_ZONE = {
     "digital_twin.png": {"floor_fraction": 0.02, "bump_fraction": 0.04},
 }
 
+# Every zone of the real 3x3 capture `capture_setup.png` plots (a hexagon,
+# 8 in, at about gantry location 84; lights off by its centre floor), read bar
+# by bar (`scripts/read_figure_zones.py`, `rig.measure.zone_shape`; heights
+# +-1 px of ~130): zones in the captures' order, the half rise in bins from
+# the centre zone's. Pixels 1 and 2 (zones 0 and 1) have their tops under the
+# figure's label: their widths, tails and near-field shares are bounds, NaN here.
+_NAN = float("nan")
+REAL_FIGURE_ZONES = {
+    "half_rise": (-1, 0, -2, 7, 0, 0, 0, 1, 0),
+    "width": (_NAN, _NAN, 4, 6, 7, 3, 17, 8, 4),
+    "tail_5_14": (_NAN, _NAN, 0.133, 0.147, 0.168, 0.056, 0.213, 0.143, 0.127),
+    "tail_15_29": (_NAN, _NAN, 0.020, 0.017, 0.010, 0.011, 0.052, 0.030, 0.026),
+    "late_over_floor": (0.98, 0.82, 0.84, 1.0, 0.47, 1.0, 0.97, 0.78, 0.81),
+    "near_field": (_NAN, _NAN, 0.024, 0.016, 0.0, 0.008, 0.061, 0.024, 0.024),
+}
+
 # The real 3x3 benchmark captures' mean counts per bin,
 # averaged over all 128 bins and every capture, per zone (rows as the release
 # stores them, (1, 1) the centre), recovered from the release's trained 1D

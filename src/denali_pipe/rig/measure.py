@@ -1,6 +1,9 @@
-"""The numbers that describe a raw centre-zone histogram, measured the way
-docs/stages.md reads them off the release's figures of real captures, so
-the rig can be held against them (`report/rig_vs_real.py`, the physics tests).
+"""The numbers that describe a raw zone histogram, measured the way
+docs/stages.md and docs/rig_zones.md read them off the release's figures of
+real captures, so the rig can be held against them (`report/rig_vs_real.py`,
+the physics tests): the centre zone's floors, direct peak and bump
+(`measure`), any zone's direct-return shape (`zone_shape`), the far column's
+early return (`early_share`).
 
 All inputs are counts per bin, (N_BINS,) float; bins are indices 0..127.
 """
@@ -25,6 +28,14 @@ EARLY_WINDOW = 3
 # The three-bounce bump is searched this many bins after the direct peak:
 # the hidden object is at least ~0.25 m from the wall, ~20 bins of path.
 BUMP_AFTER_PEAK = 15
+# Any zone's shape (`zone_shape`): its floor over the first bins, before any
+# return (the near-field one, ~38 bins before the direct return, starts at
+# bin 12 in the release's figure); the near-field window; the two tail
+# windows after the direct peak (bins from it).
+SHAPE_FLOOR_BINS = 12
+NEAR_FIELD = slice(12, 19)
+TAILS = {"tail_5_14": (5, 15), "tail_15_29": (15, 30)}
+SHAPE_LATE_BINS = 18
 
 
 @dataclass(frozen=True)
@@ -112,6 +123,30 @@ def matched_filter_snr(signal: np.ndarray, expected: np.ndarray, read_noise: flo
     sqrt(sum_b s_b^2 / var_b), with var_b the Poisson variance plus read
     noise squared (counts^2)."""
     return np.sqrt((np.asarray(signal, float) ** 2 / (np.asarray(expected, float) + read_noise**2)).sum(-1))
+
+
+def zone_shape(h: np.ndarray) -> dict[str, float]:
+    """The shape of any zone's direct return in one histogram (N_BINS,),
+    as `scripts/read_figure_zones.py` reads each panel of the release's
+    plotted real capture: `half_rise`, the first bin at half the peak above
+    the floor (the median of the first SHAPE_FLOOR_BINS bins); `width`, bins
+    from it to the last bin above half; `tail_5_14` and `tail_15_29`, the
+    mean height above the floor in those bins after the peak, over the
+    peak's; `late_over_floor`, the last SHAPE_LATE_BINS bins' mean over the
+    floor; `near_field`, the largest excess in NEAR_FIELD over the peak's."""
+    h = np.asarray(h, float)
+    floor = float(np.median(h[:SHAPE_FLOOR_BINS]))
+    above = h - floor
+    peak = int(np.argmax(above))
+    half = np.nonzero(above >= 0.5 * above[peak])[0]
+    tails = {name: float(above[peak + a : peak + b].mean() / above[peak]) for name, (a, b) in TAILS.items()}
+    return {
+        "half_rise": float(half[0]),
+        "width": float(half[-1] - half[0] + 1),
+        **tails,
+        "late_over_floor": float(h[-SHAPE_LATE_BINS:].mean() / floor),
+        "near_field": float((h[NEAR_FIELD].max() - floor) / above[peak]),
+    }
 
 
 def early_share(zones: np.ndarray, zone: int) -> float:
