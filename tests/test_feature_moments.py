@@ -115,3 +115,22 @@ def test_log_zone_means_are_the_transform_averaged():
 def test_a_missing_file_is_named(tmp_path):
     with pytest.raises(FileNotFoundError, match=fm.NPZ):
         fm.load_backbones(tmp_path)
+
+
+def test_the_size_nets_hold_the_two_halves_of_the_base_captures(nets):
+    """The 4 in and 8 in nets' log moments pool exactly into the both-size
+    net's: each held every base capture of its size, which is what lets their
+    difference stand for the real size contrast."""
+    m = fm.real_log_moments_by_size(nets)
+    (mu4, sd4), (mu8, sd8), (mu, sd) = m["4inch"], m["8inch"], m["both"]
+    assert (mu4 + mu8) / 2 == pytest.approx(mu, abs=1e-5)
+    assert (sd4**2 + sd8**2) / 2 + ((mu8 - mu4) / 2) ** 2 == pytest.approx(sd**2, abs=1e-5)
+    # the real 8 in objects raise the log counts a little and narrow their spread
+    assert 0 < mu8 - mu4 < 0.01 and -0.01 < sd8 - sd4 < 0
+
+
+def test_log_moments_and_a_missing_size_net(nets):
+    hist = np.array([[[0.0, np.e - 1]], [[-5.0, np.e**3 - 1]]])  # log1p: 0, 1, 0 (clipped), 3
+    assert fm.log_moments(hist) == pytest.approx((1.0, np.sqrt(1.5)))
+    with pytest.raises(KeyError, match="italics_loc"):
+        fm.real_log_moments_by_size([n for n in nets if n.name != "italics_loc"])

@@ -36,6 +36,11 @@ LAYERS = (1, 2, 3)
 # (every log-input net's own mean and std are within 0.002 of these).
 LOG_MEAN = 7.108
 LOG_STD = 0.785
+# Log-input nets whose training captures were the base objects at one size,
+# and at both (their JSON's `training_data`). A log-input net's transform
+# holds the exact mean and std of log1p(counts) over its training captures'
+# zones and bins, so these three give the real captures' log moments per size.
+SIZE_NETS = {"4inch": "splits_loc_by_size", "8inch": "italics_loc", "both": "nonrr_loc"}
 # Samples per forward chunk: bounds the activations' memory (~20 MB a layer).
 CHUNK = 256
 COLUMNS = ("net", "input", "layer", "channels", "mean_term", "var_term", "distance", "var_log_ratio")
@@ -213,3 +218,22 @@ def log_zone_means(hist: np.ndarray) -> np.ndarray:
     captures' row-major zone order, from raw counts (N, 9, 128)."""
     z = (np.log1p(np.maximum(np.asarray(hist, float), 0.0)) - LOG_MEAN) / LOG_STD
     return z.mean(axis=(0, 2))
+
+
+def log_moments(hist: np.ndarray) -> tuple[float, float]:
+    """The mean and (population) std of log1p(max(counts, 0)) over every
+    sample, zone and bin of raw counts (N, Z, bins): what a log-input net's
+    transform is fitted to."""
+    logs = np.log1p(np.maximum(np.asarray(hist, float), 0.0))
+    return float(logs.mean()), float(logs.std())
+
+
+def real_log_moments_by_size(nets: list[Backbone]) -> dict[str, tuple[float, float]]:
+    """{"4inch", "8inch", "both": (mean, std) of log1p(counts)} over the real
+    base-object captures of each size and of both, read from the transforms
+    of the `SIZE_NETS`."""
+    by_name = {net.name: net for net in nets}
+    missing = [name for name in SIZE_NETS.values() if name not in by_name]
+    if missing:
+        raise KeyError(f"feature statistics: no net {', '.join(missing)} (the log moments per size need {', '.join(SIZE_NETS.values())})")
+    return {size: (by_name[name].log_mean, by_name[name].log_std) for size, name in SIZE_NETS.items()}

@@ -1,0 +1,92 @@
+#!/usr/bin/env python
+"""How much an object's size changes the captures: the real sensor's
+contrast between 4 in and 8 in objects beside the rig's. Prints a table,
+writes nothing.
+
+    python scripts/size_contrast.py                      # 300 scenes, a minute on one core
+    python scripts/size_contrast.py --scenes 100 --seed 1 --stats DIR
+
+Real: the release's log-input nets trained on the base objects at 4 in only,
+at 8 in only and at both (`rig.feature_moments.SIZE_NETS`) carry in their
+input transform the exact mean and std of log1p(counts) over their training
+captures' zones and bins (the two halves pool into the third to 1e-5).
+Their difference is the real captures' size contrast as a log-input network
+meets it.
+
+Rig: the same moments of paired captures made with the rig's functions,
+single threaded: a random base object at a random gantry location at its
+design pose (`rig.scene.design_scene`), once at each size, both lightings,
+one noisy capture each under the config's photometry, no campaign
+nuisances. Also printed: each zone's share of the rig's contrast, and the 4 in
+object's own contrast over the mount alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from denali_pipe.core.objects import load_catalogue
+from denali_pipe.rig import feature_moments as fm
+from denali_pipe.rig import histograms as H
+from denali_pipe.rig.scene import design_scene
+
+REPO = Path(__file__).resolve().parents[1]
+STATS = REPO.parent / "shared" / "denali-assets" / "feature_stats"
+N_LOCATIONS = 100
+
+
+def paired_captures(catalogue: dict, phot: H.Photometry, n: int, seed: int) -> dict[str, np.ndarray]:
+    """{"4inch", "8inch", "mount": (2 n, 9, 128)}: n random scenes, each at
+    both sizes and with the mount alone, both lightings, one noisy capture
+    each; the three share every scene, lighting and noise seed."""
+    rng = np.random.default_rng(seed)
+    base = sorted(name for name, spec in catalogue.items() if spec.variant == "base")
+    out = {"4inch": [], "8inch": [], "mount": []}
+    for i in range(n):
+        obj, location = catalogue[base[rng.integers(len(base))]], int(rng.integers(N_LOCATIONS))
+        scenes = {size: design_scene(obj, size, location) for size in ("4inch", "8inch")}
+        scenes["mount"] = scenes["4inch"][:1]
+        for key, scene in scenes.items():
+            light = H.transport("3x3", scene, phot)
+            for on in (False, True):
+                expected = H.counts_from_transport("3x3", on, light, phot)
+                out[key].append(H.sample_counts(expected, phot, np.random.default_rng((seed, i, on))).reshape(9, -1))
+    return {key: np.asarray(v, float) for key, v in out.items()}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", type=Path, default=REPO / "config" / "config.yaml")
+    ap.add_argument("--stats", type=Path, default=STATS, help="the release's feature statistics folder")
+    ap.add_argument("--scenes", type=int, default=300)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    with open(args.config) as f:
+        phot = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
+    real = fm.real_log_moments_by_size(fm.load_backbones(args.stats))
+    hist = paired_captures(load_catalogue(REPO / "config" / "objects.tsv"), phot, args.scenes, args.seed)
+    rig = {key: fm.log_moments(h) for key, h in hist.items()}
+    # each scene's contrast, for the standard error over scenes
+    per_scene = np.log1p(np.maximum(hist["8inch"], 0)).mean(axis=(1, 2)) - np.log1p(np.maximum(hist["4inch"], 0)).mean(axis=(1, 2))
+    se = per_scene.std(ddof=1) / np.sqrt(len(per_scene))
+
+    print(f"log1p(counts) over every zone and bin; rig: {args.scenes} paired scenes x 2 lightings")
+    print(f"{'':8s}{'real mean':>12s}{'real std':>12s}{'rig mean':>12s}{'rig std':>12s}")
+    for size in ("4inch", "8inch"):
+        print(f"{size:8s}{real[size][0]:12.5f}{real[size][1]:12.5f}{rig[size][0]:12.5f}{rig[size][1]:12.5f}")
+    d_real = [real["8inch"][i] - real["4inch"][i] for i in (0, 1)]
+    d_rig = [rig["8inch"][i] - rig["4inch"][i] for i in (0, 1)]
+    print(f"{'8 - 4 in':8s}{d_real[0]:+12.5f}{d_real[1]:+12.5f}{d_rig[0]:+12.5f}{d_rig[1]:+12.5f}   (rig mean's SE over scenes {se:.5f})")
+    print(f"rig contrast over real: mean {d_rig[0] / d_real[0]:.2f}x, std {d_rig[1] / d_real[1]:.2f}x")
+    by_zone = (np.log1p(np.maximum(hist["8inch"], 0)) - np.log1p(np.maximum(hist["4inch"], 0))).mean(axis=(0, 2))
+    own = (np.log1p(np.maximum(hist["4inch"], 0)) - np.log1p(np.maximum(hist["mount"], 0))).mean(axis=(0, 2))
+    print("rig, each zone's mean log1p, 8 - 4 in (rows as the captures store them): " + " ".join(f"{v:+.4f}" for v in by_zone))
+    print("rig, each zone's mean log1p, 4 in object - mount alone:                  " + " ".join(f"{v:+.4f}" for v in own))
+
+
+if __name__ == "__main__":
+    main()
