@@ -13,6 +13,11 @@ ways (4 in -> 8 in, 8 in -> 4 in), under each combination of
   the training part, the predictions mapped back) or `bounded` (standardised
   through the clean protocol's bounded head, `train.training.position_head`:
   a tanh into the training positions' box and half a gantry step).
+With `--test-gains`, the held-out size's inputs are multiplied by each gain
+before the input transform (the training part's statistics unchanged): how
+the localiser would fare if the held-out size's returns were that much
+dimmer or brighter against the training size's (the noise scales with them,
+so a gain below 1 also makes its inputs quieter than a capture's).
 The validation part is 20 % of the training size's (set, location) capture
 groups, as the clean protocol draws it for this split (`splits.validation_split`):
 it shares the training size, so it cannot show the size shift itself. Each row:
@@ -85,6 +90,8 @@ def main() -> None:
     p.add_argument("--seeds", type=int, nargs="+", default=[42])
     p.add_argument("--inputs", nargs="+", choices=INPUTS, default=list(INPUTS))
     p.add_argument("--targets", nargs="+", choices=TARGETS, default=list(TARGETS))
+    p.add_argument("--train-sizes", nargs="+", choices=["4inch", "8inch"], default=["4inch", "8inch"])
+    p.add_argument("--test-gains", type=float, nargs="+", default=[1.0], help="factors on the held-out size's inputs")
     p.add_argument("--precision", choices=["auto", "float32", "bfloat16"], default="auto", help="as config train.precision")
     args = p.parse_args()
     precision = training_precision(args.precision, "cpu", cpu_has_amx())
@@ -94,10 +101,14 @@ def main() -> None:
     print(f"mean summed counts of a sample: {totals.round(0).to_dict()}")
     rows = []
     for seed in args.seeds:
-        for train_size in ("4inch", "8inch"):
+        for train_size, gain in [(size, g) for size in args.train_sizes for g in args.test_gains]:
             tr, va, te = size_split(samples, train_size, seed)
+            xg = x
+            if gain != 1.0:
+                xg = x.copy()
+                xg[te] *= gain
             for kind in args.inputs:
-                xn = torch.from_numpy(np.ascontiguousarray(model_input(kind, x, tr)))
+                xn = torch.from_numpy(np.ascontiguousarray(model_input(kind, xg, tr)))
                 for targets in args.targets:
                     # the clean protocol's own standardisation and box (train.training); its first two rows alone map without the bound
                     stats = None if targets == "metres" else target_statistics("location", "clean", y[tr])[: 2 if targets == "standardised" else 4]
@@ -113,7 +124,7 @@ def main() -> None:
                     pv, pt = to_metres(infer(model, xn[va]), stats), to_metres(infer(model, xn[te]), stats)
                     rows.append(
                         {
-                            "seed": seed, "train": train_size, "input": kind, "targets": targets,
+                            "seed": seed, "train": train_size, "test_gain": gain, "input": kind, "targets": targets,
                             "val_rmse": regression_metrics(pv, y[va])["rmse"], "test_rmse": regression_metrics(pt, y[te])["rmse"],
                             "mean_rmse": regression_metrics(np.tile(y[tr].mean(0), (len(te), 1)), y[te])["rmse"],
                             **workspace_metrics(pt), **error_trend(pt, y[te]),
@@ -122,7 +133,7 @@ def main() -> None:
     table = pd.DataFrame(rows)
     print(table.round(3).to_string(index=False))
     print(
-        table.groupby(["train", "input", "targets"])[
+        table.groupby(["train", "test_gain", "input", "targets"])[
             ["val_rmse", "test_rmse", "outside_workspace", "max_outside_workspace", "bias_x", "bias_y", "slope_x", "slope_y"]
         ]
         .mean()
