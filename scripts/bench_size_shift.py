@@ -6,8 +6,11 @@
 The 1D CNN localiser trained on one object size and tested on the other, both
 ways (4 in -> 8 in, 8 in -> 4 in), under each combination of
 - the input: `raw` counts (the config's), `log_z` (signed log, z-scored on the
-  training part) or `per_sample` (each sample over its own summed |counts|,
-  scaled by the number of values: blind to the return's amplitude, which
+  training part), `per_sample` (each sample over its own summed |counts|,
+  scaled by the number of values: blind to a uniform gain, but the sum is
+  mostly noise and the background's residue), or `per_sample_rms` /
+  `per_sample_peak` (over its root mean square / its largest |count|, which
+  the object's return dominates: blind to the return's amplitude, which
   scales with the object's area);
 - the targets: `metres` (the reference's), `standardised` (z-scored on
   the training part, the predictions mapped back) or `bounded` (standardised
@@ -54,7 +57,7 @@ from denali_pipe.train.training import (
     training_precision,
 )
 
-INPUTS = ("raw", "log_z", "per_sample")
+INPUTS = ("raw", "log_z", "per_sample", "per_sample_rms", "per_sample_peak")
 TARGETS = ("metres", "standardised", "bounded")
 
 
@@ -62,8 +65,9 @@ def model_input(kind: str, x: np.ndarray, train: np.ndarray) -> np.ndarray:
     if kind in ("raw", "log_z"):
         _, stats = normalise(x[train], kind)
         return normalise(x, kind, stats)[0]
-    total = np.abs(x).reshape(len(x), -1).sum(axis=1).reshape(-1, 1, 1, 1)
-    return (x * (x[0].size / np.maximum(total, 1e-6))).astype(np.float32)
+    flat = np.abs(x).reshape(len(x), -1)
+    scale = {"per_sample": flat.mean(axis=1), "per_sample_rms": np.sqrt((flat**2).mean(axis=1)), "per_sample_peak": flat.max(axis=1)}[kind]
+    return (x / np.maximum(scale, 1e-6).reshape(-1, 1, 1, 1)).astype(np.float32)
 
 
 def error_trend(pred: np.ndarray, y: np.ndarray) -> dict:
