@@ -5,6 +5,7 @@ writes nothing.
 
     python scripts/size_contrast.py                      # 300 scenes, a minute on one core
     python scripts/size_contrast.py --scenes 100 --seed 1 --stats DIR
+    python scripts/size_contrast.py --terms               # and which response terms move it
 
 Real: the release's log-input nets trained on the base objects at 4 in only,
 at 8 in only and at both (`rig.feature_moments.SIZE_NETS`) carry in their
@@ -18,12 +19,15 @@ single threaded: a random base object at a random gantry location at its
 design pose (`rig.scene.design_scene`), once at each size, both lightings,
 one noisy capture each under the config's photometry, no campaign
 nuisances. Also printed: each zone's share of the rig's contrast, and the 4 in
-object's own contrast over the mount alone.
+object's own contrast over the mount alone. With `--terms`, the contrast
+again with one response term changed at a time (the light transport kept):
+which of the rig's terms move it.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -39,23 +43,52 @@ STATS = REPO.parent / "shared" / "denali-assets" / "feature_stats"
 N_LOCATIONS = 100
 
 
-def paired_captures(catalogue: dict, phot: H.Photometry, n: int, seed: int) -> dict[str, np.ndarray]:
-    """{"4inch", "8inch", "mount": (2 n, 9, 128)}: n random scenes, each at
-    both sizes and with the mount alone, both lightings, one noisy capture
-    each; the three share every scene, lighting and noise seed."""
+def paired_transports(catalogue: dict, phot: H.Photometry, n: int, seed: int) -> list[dict[str, H.Transport]]:
+    """n random scenes, each as {"4inch", "8inch", "mount"} light transports:
+    a base object at a gantry location at each size, and the mount alone."""
     rng = np.random.default_rng(seed)
     base = sorted(name for name, spec in catalogue.items() if spec.variant == "base")
-    out = {"4inch": [], "8inch": [], "mount": []}
-    for i in range(n):
+    out = []
+    for _ in range(n):
         obj, location = catalogue[base[rng.integers(len(base))]], int(rng.integers(N_LOCATIONS))
         scenes = {size: design_scene(obj, size, location) for size in ("4inch", "8inch")}
         scenes["mount"] = scenes["4inch"][:1]
-        for key, scene in scenes.items():
-            light = H.transport("3x3", scene, phot)
+        out.append({key: H.transport("3x3", scene, phot) for key, scene in scenes.items()})
+    return out
+
+
+def captures(transports: list[dict[str, H.Transport]], phot: H.Photometry, seed: int) -> dict[str, np.ndarray]:
+    """{"4inch", "8inch", "mount": (2 n, 9, 128)}: both lightings, one noisy
+    capture each; the three share every scene, lighting and noise seed."""
+    out = {key: [] for key in transports[0]}
+    for i, scene in enumerate(transports):
+        for key, light in scene.items():
             for on in (False, True):
                 expected = H.counts_from_transport("3x3", on, light, phot)
                 out[key].append(H.sample_counts(expected, phot, np.random.default_rng((seed, i, on))).reshape(9, -1))
     return {key: np.asarray(v, float) for key, v in out.items()}
+
+
+def contrast(hist: dict[str, np.ndarray]) -> tuple[float, float]:
+    """(mean, std) of log1p(counts) at 8 in less at 4 in."""
+    (m4, s4), (m8, s8) = fm.log_moments(hist["4inch"]), fm.log_moments(hist["8inch"])
+    return m8 - m4, s8 - s4
+
+
+def term_rows(phot: H.Photometry) -> dict[str, H.Photometry]:
+    """The response terms changed one at a time (as scripts/rig_feature_terms.py)."""
+    change = lambda **kw: dataclasses.replace(phot, **kw)  # noqa: E731
+    return {
+        "configured rig": phot,
+        "floor: no dark counts": change(dark_counts=0.0),
+        "floor: no room light": change(ambient_counts=0.0),
+        "floor: room light x2": change(ambient_counts=2 * phot.ambient_counts),
+        "floor: no slow tail": change(slow_tail_fraction=0.0),
+        "direct: flux x2": change(direct_peak_counts=2 * phot.direct_peak_counts),
+        "direct: no saturation": change(saturation_counts=1e12),
+        "direct: no dead time": change(dead_time_counts=1e15),
+        "receiver: no glare": change(glare_share=0.0),
+    }
 
 
 def main() -> None:
@@ -64,11 +97,13 @@ def main() -> None:
     ap.add_argument("--stats", type=Path, default=STATS, help="the release's feature statistics folder")
     ap.add_argument("--scenes", type=int, default=300)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--terms", action="store_true", help="also the contrast with each response term changed")
     args = ap.parse_args()
     with open(args.config) as f:
         phot = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
     real = fm.real_log_moments_by_size(fm.load_backbones(args.stats))
-    hist = paired_captures(load_catalogue(REPO / "config" / "objects.tsv"), phot, args.scenes, args.seed)
+    transports = paired_transports(load_catalogue(REPO / "config" / "objects.tsv"), phot, args.scenes, args.seed)
+    hist = captures(transports, phot, args.seed)
     rig = {key: fm.log_moments(h) for key, h in hist.items()}
     # each scene's contrast, for the standard error over scenes
     per_scene = np.log1p(np.maximum(hist["8inch"], 0)).mean(axis=(1, 2)) - np.log1p(np.maximum(hist["4inch"], 0)).mean(axis=(1, 2))
@@ -79,13 +114,19 @@ def main() -> None:
     for size in ("4inch", "8inch"):
         print(f"{size:8s}{real[size][0]:12.5f}{real[size][1]:12.5f}{rig[size][0]:12.5f}{rig[size][1]:12.5f}")
     d_real = [real["8inch"][i] - real["4inch"][i] for i in (0, 1)]
-    d_rig = [rig["8inch"][i] - rig["4inch"][i] for i in (0, 1)]
+    d_rig = contrast(hist)
     print(f"{'8 - 4 in':8s}{d_real[0]:+12.5f}{d_real[1]:+12.5f}{d_rig[0]:+12.5f}{d_rig[1]:+12.5f}   (rig mean's SE over scenes {se:.5f})")
     print(f"rig contrast over real: mean {d_rig[0] / d_real[0]:.2f}x, std {d_rig[1] / d_real[1]:.2f}x")
-    by_zone = (np.log1p(np.maximum(hist["8inch"], 0)) - np.log1p(np.maximum(hist["4inch"], 0))).mean(axis=(0, 2))
-    own = (np.log1p(np.maximum(hist["4inch"], 0)) - np.log1p(np.maximum(hist["mount"], 0))).mean(axis=(0, 2))
+    logs = {key: np.log1p(np.maximum(h, 0)) for key, h in hist.items()}
+    by_zone = (logs["8inch"] - logs["4inch"]).mean(axis=(0, 2))
+    own = (logs["4inch"] - logs["mount"]).mean(axis=(0, 2))
     print("rig, each zone's mean log1p, 8 - 4 in (rows as the captures store them): " + " ".join(f"{v:+.4f}" for v in by_zone))
     print("rig, each zone's mean log1p, 4 in object - mount alone:                  " + " ".join(f"{v:+.4f}" for v in own))
+    if args.terms:
+        print(f"\n{'one term changed':28s}{'mean 8 - 4 in':>15s}{'std 8 - 4 in':>15s}   (real {d_real[0]:+.5f}, {d_real[1]:+.5f})")
+        for name, changed in term_rows(phot).items():
+            d = contrast(captures([{size: scene[size] for size in ("4inch", "8inch")} for scene in transports], changed, args.seed))
+            print(f"{name:28s}{d[0]:+15.5f}{d[1]:+15.5f}", flush=True)
 
 
 if __name__ == "__main__":
