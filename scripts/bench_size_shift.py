@@ -19,8 +19,10 @@ ways (4 in -> 8 in, 8 in -> 4 in), under each combination of
 With `--test-gains`, the held-out size's inputs are multiplied by each gain
 before the input transform (the training part's statistics unchanged): how
 the localiser would fare if the held-out size's returns were that much
-dimmer or brighter against the training size's (the noise scales with them,
-so a gain below 1 also makes its inputs quieter than a capture's).
+dimmer or brighter against the training size's. The noise scales with them,
+so a gain below 1 also makes its inputs quieter than a capture's;
+`--keep-noise` adds it back: Gaussian noise of each capture's own variance
+over its repeats (per zone and bin) times 1 - gain^2.
 The validation part is 20 % of the training size's (set, location) capture
 groups, as the clean protocol draws it for this split (`splits.validation_split`):
 it shares the training size, so it cannot show the size shift itself. Each row:
@@ -70,6 +72,20 @@ def model_input(kind: str, x: np.ndarray, train: np.ndarray) -> np.ndarray:
     return (x / np.maximum(scale, 1e-6).reshape(-1, 1, 1, 1)).astype(np.float32)
 
 
+def dimmed(x: np.ndarray, samples: pd.DataFrame, rows: np.ndarray, gain: float, keep_noise: bool, seed: int) -> np.ndarray:
+    """x with `rows` times `gain`; with `keep_noise` (gain < 1), plus Gaussian
+    noise of each row's capture group's variance over its repeats (set,
+    location; per zone and bin) times 1 - gain^2, so the noise keeps its level."""
+    out = x.copy()
+    out[rows] *= gain
+    if keep_noise:
+        group = samples.iloc[rows].groupby(["set", "location"]).ngroup().to_numpy()
+        var = np.stack([x[rows[group == g]].var(axis=0, ddof=1) for g in range(group.max() + 1)])
+        noise = np.random.default_rng(seed).standard_normal(out[rows].shape) * np.sqrt((1 - gain**2) * var[group])
+        out[rows] += noise.astype(out.dtype)
+    return out
+
+
 def error_trend(pred: np.ndarray, y: np.ndarray) -> dict:
     """The errors' (N, 2) mean per coordinate (m) and their slope against the truth y (N, 2) m."""
     err = pred - y
@@ -96,6 +112,7 @@ def main() -> None:
     p.add_argument("--targets", nargs="+", choices=TARGETS, default=list(TARGETS))
     p.add_argument("--train-sizes", nargs="+", choices=["4inch", "8inch"], default=["4inch", "8inch"])
     p.add_argument("--test-gains", type=float, nargs="+", default=[1.0], help="factors on the held-out size's inputs")
+    p.add_argument("--keep-noise", action="store_true", help="a dimmed held-out size keeps its noise's level")
     p.add_argument("--precision", choices=["auto", "float32", "bfloat16"], default="auto", help="as config train.precision")
     args = p.parse_args()
     precision = training_precision(args.precision, "cpu", cpu_has_amx())
@@ -107,10 +124,7 @@ def main() -> None:
     for seed in args.seeds:
         for train_size, gain in [(size, g) for size in args.train_sizes for g in args.test_gains]:
             tr, va, te = size_split(samples, train_size, seed)
-            xg = x
-            if gain != 1.0:
-                xg = x.copy()
-                xg[te] *= gain
+            xg = x if gain == 1.0 else dimmed(x, samples, te, gain, args.keep_noise, seed)
             for kind in args.inputs:
                 xn = torch.from_numpy(np.ascontiguousarray(model_input(kind, xg, tr)))
                 for targets in args.targets:
