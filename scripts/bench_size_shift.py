@@ -73,7 +73,7 @@ def model_input(kind: str, x: np.ndarray, train: np.ndarray) -> np.ndarray:
 
 
 def dimmed(x: np.ndarray, samples: pd.DataFrame, rows: np.ndarray, gain: float, keep_noise: bool, seed: int) -> np.ndarray:
-    """x with `rows` times `gain`; with `keep_noise` (gain < 1), plus Gaussian
+    """x with `rows` times `gain`; with `keep_noise` (gain <= 1), plus Gaussian
     noise of each row's capture group's variance over its repeats (set,
     location; per zone and bin) times 1 - gain^2, so the noise keeps its level."""
     out = x.copy()
@@ -115,6 +115,8 @@ def main() -> None:
     p.add_argument("--keep-noise", action="store_true", help="a dimmed held-out size keeps its noise's level")
     p.add_argument("--precision", choices=["auto", "float32", "bfloat16"], default="auto", help="as config train.precision")
     args = p.parse_args()
+    if args.keep_noise and max(args.test_gains) > 1:
+        p.error("--keep-noise adds noise back to a dimmed size; it cannot take it out of a brightened one (a gain above 1)")
     precision = training_precision(args.precision, "cpu", cpu_has_amx())
     x, samples, _ = read_dataset(args.dataset.with_suffix(".zarr"), args.dataset.with_suffix(".parquet"))
     y = samples[["x", "y"]].to_numpy(np.float32)

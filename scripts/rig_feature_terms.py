@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from denali_pipe.core.geometry import N_LOCATIONS
 from denali_pipe.core.objects import load_catalogue
 from denali_pipe.report.paper import REAL_LOG_ZONE_MEANS, REAL_ZONE_MEANS
 from denali_pipe.rig import feature_moments as fm
@@ -49,7 +50,6 @@ from denali_pipe.rig.scene import design_scene
 REPO = Path(__file__).resolve().parents[1]
 STATS = REPO.parent / "shared" / "denali-assets" / "feature_stats"
 SIZES = ("4inch", "8inch")
-N_LOCATIONS = 100
 
 
 def scenes(catalogue: dict, phot: H.Photometry, n: int, seed: int) -> list[tuple[H.Transport, H.Transport]]:

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from denali_pipe.core.geometry import N_LOCATIONS
 from denali_pipe.core.objects import load_catalogue
 from denali_pipe.rig import feature_moments as fm
 from denali_pipe.rig import histograms as H
@@ -40,7 +41,6 @@ from denali_pipe.rig.scene import design_scene
 
 REPO = Path(__file__).resolve().parents[1]
 STATS = REPO.parent / "shared" / "denali-assets" / "feature_stats"
-N_LOCATIONS = 100
 
 
 def paired_transports(catalogue: dict, phot: H.Photometry, n: int, seed: int) -> list[dict[str, H.Transport]]:
@@ -104,9 +104,10 @@ def main() -> None:
     real = fm.real_log_moments_by_size(fm.load_backbones(args.stats))
     transports = paired_transports(load_catalogue(REPO / "config" / "objects.tsv"), phot, args.scenes, args.seed)
     hist = captures(transports, phot, args.seed)
-    rig = {key: fm.log_moments(h) for key, h in hist.items()}
+    logs = {key: fm.log_counts(h) for key, h in hist.items()}
+    rig = {key: (float(v.mean()), float(v.std())) for key, v in logs.items()}
     # each scene's contrast, for the standard error over scenes
-    per_scene = np.log1p(np.maximum(hist["8inch"], 0)).mean(axis=(1, 2)) - np.log1p(np.maximum(hist["4inch"], 0)).mean(axis=(1, 2))
+    per_scene = logs["8inch"].mean(axis=(1, 2)) - logs["4inch"].mean(axis=(1, 2))
     se = per_scene.std(ddof=1) / np.sqrt(len(per_scene))
 
     print(f"log1p(counts) over every zone and bin; rig: {args.scenes} paired scenes x 2 lightings")
@@ -114,10 +115,9 @@ def main() -> None:
     for size in ("4inch", "8inch"):
         print(f"{size:8s}{real[size][0]:12.5f}{real[size][1]:12.5f}{rig[size][0]:12.5f}{rig[size][1]:12.5f}")
     d_real = [real["8inch"][i] - real["4inch"][i] for i in (0, 1)]
-    d_rig = contrast(hist)
+    d_rig = [rig["8inch"][i] - rig["4inch"][i] for i in (0, 1)]
     print(f"{'8 - 4 in':8s}{d_real[0]:+12.5f}{d_real[1]:+12.5f}{d_rig[0]:+12.5f}{d_rig[1]:+12.5f}   (rig mean's SE over scenes {se:.5f})")
     print(f"rig contrast over real: mean {d_rig[0] / d_real[0]:.2f}x, std {d_rig[1] / d_real[1]:.2f}x")
-    logs = {key: np.log1p(np.maximum(h, 0)) for key, h in hist.items()}
     by_zone = (logs["8inch"] - logs["4inch"]).mean(axis=(0, 2))
     own = (logs["4inch"] - logs["mount"]).mean(axis=(0, 2))
     print("rig, each zone's mean log1p, 8 - 4 in (rows as the captures store them): " + " ".join(f"{v:+.4f}" for v in by_zone))

@@ -75,7 +75,7 @@ class Backbone:
         x = np.array(hist, dtype=float)  # a copy: torch wants writable arrays
         if self.input == "raw":
             return x
-        return (np.log1p(np.maximum(x, 0.0)) - self.log_mean) / self.log_std
+        return (log_counts(x) - self.log_mean) / self.log_std
 
 
 def load_backbones(folder: Path) -> list[Backbone]:
@@ -216,15 +216,21 @@ def summary(table: pd.DataFrame) -> dict:
 def log_zone_means(hist: np.ndarray) -> np.ndarray:
     """Each zone's mean of Part 7's z over samples and bins, (9,) in the
     captures' row-major zone order, from raw counts (N, 9, 128)."""
-    z = (np.log1p(np.maximum(np.asarray(hist, float), 0.0)) - LOG_MEAN) / LOG_STD
+    z = (log_counts(hist) - LOG_MEAN) / LOG_STD
     return z.mean(axis=(0, 2))
 
 
+def log_counts(hist: np.ndarray) -> np.ndarray:
+    """log1p(max(counts, 0)) of raw counts, float64, the shape of `hist`:
+    what the log-input nets' transform starts from."""
+    return np.log1p(np.maximum(np.asarray(hist, float), 0.0))
+
+
 def log_moments(hist: np.ndarray) -> tuple[float, float]:
-    """The mean and (population) std of log1p(max(counts, 0)) over every
-    sample, zone and bin of raw counts (N, Z, bins): what a log-input net's
-    transform is fitted to."""
-    logs = np.log1p(np.maximum(np.asarray(hist, float), 0.0))
+    """The mean and (population) std of `log_counts` over every sample, zone
+    and bin of raw counts (N, Z, bins): what a log-input net's transform is
+    fitted to."""
+    logs = log_counts(hist)
     return float(logs.mean()), float(logs.std())
 
 
