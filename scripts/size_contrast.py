@@ -19,7 +19,10 @@ single threaded: a random base object at a random gantry location at its
 design pose (`rig.scene.design_scene`), once at each size, both lightings,
 one noisy capture each under the config's photometry, no campaign
 nuisances. Also printed: each zone's share of the rig's contrast, and the 4 in
-object's own contrast over the mount alone. With `--terms`, the contrast
+object's own contrast over the mount alone, and the sd that the campaign's
+set-to-set drifts (`rig.nuisances`: laser power, room light) give the real
+contrast, pooled as the release pools it (one set per object, size and
+lighting). With `--terms`, the contrast
 again with one response term changed at a time (the light transport kept):
 which of the rig's terms move it.
 """
@@ -75,6 +78,24 @@ def contrast(hist: dict[str, np.ndarray]) -> tuple[float, float]:
     return m8 - m4, s8 - s4
 
 
+def drift_sd(transports: list[dict[str, H.Transport]], phot: H.Photometry, nuisances: dict, n_sets: int) -> float:
+    """The sd of the size contrast's mean that set-to-set drift alone gives
+    when each size and lighting pools `n_sets` sets: one sd of laser power
+    and of room light, each set's mean log1p moved linearly (expected counts
+    of the 4 in scenes), the two lightings averaged."""
+
+    def mean_log(on: bool, power: float = 1.0, ambient: float = 1.0) -> float:
+        cond = H.Conditions(power, ambient, 0.0)
+        return float(np.mean([fm.log_counts(H.counts_from_transport("3x3", on, scene["4inch"], phot, cond)).mean() for scene in transports]))
+
+    var = 0.0
+    for on in (False, True):
+        base = mean_log(on)
+        var += (mean_log(on, power=1 + nuisances["power_drift"]) - base) ** 2 + (mean_log(on, ambient=1 + nuisances["ambient_drift"]) - base) ** 2
+    # each size's pooled mean averages the two lightings' n_sets sets; the contrast differences two sizes
+    return float(np.sqrt(2 * var / 4 / n_sets))
+
+
 def term_rows(phot: H.Photometry) -> dict[str, H.Photometry]:
     """The response terms changed one at a time (as scripts/rig_feature_terms.py)."""
     change = lambda **kw: dataclasses.replace(phot, **kw)  # noqa: E731
@@ -100,9 +121,11 @@ def main() -> None:
     ap.add_argument("--terms", action="store_true", help="also the contrast with each response term changed")
     args = ap.parse_args()
     with open(args.config) as f:
-        phot = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
+        rig_config = yaml.safe_load(f)["rig"]
+    phot = H.Photometry.from_config(rig_config["photometry"])
+    catalogue = load_catalogue(REPO / "config" / "objects.tsv")
     real = fm.real_log_moments_by_size(fm.load_backbones(args.stats))
-    transports = paired_transports(load_catalogue(REPO / "config" / "objects.tsv"), phot, args.scenes, args.seed)
+    transports = paired_transports(catalogue, phot, args.scenes, args.seed)
     hist = captures(transports, phot, args.seed)
     logs = {key: fm.log_counts(h) for key, h in hist.items()}
     rig = {key: (float(v.mean()), float(v.std())) for key, v in logs.items()}
@@ -118,6 +141,11 @@ def main() -> None:
     d_rig = [rig["8inch"][i] - rig["4inch"][i] for i in (0, 1)]
     print(f"{'8 - 4 in':8s}{d_real[0]:+12.5f}{d_real[1]:+12.5f}{d_rig[0]:+12.5f}{d_rig[1]:+12.5f}   (rig mean's SE over scenes {se:.5f})")
     print(f"rig contrast over real: mean {d_rig[0] / d_real[0]:.2f}x, std {d_rig[1] / d_real[1]:.2f}x")
+    n_sets = sum(spec.variant == "base" for spec in catalogue.values())
+    sd = drift_sd(transports[:30], phot, rig_config["nuisances"], n_sets)
+    print(
+        f"the real mean contrast's sd from set-to-set drift ({n_sets} sets per size and lighting): {sd:.5f}; rig - real = {(d_rig[0] - d_real[0]) / sd:.1f} sd"
+    )
     by_zone = (logs["8inch"] - logs["4inch"]).mean(axis=(0, 2))
     own = (logs["4inch"] - logs["mount"]).mean(axis=(0, 2))
     print("rig, each zone's mean log1p, 8 - 4 in (rows as the captures store them): " + " ".join(f"{v:+.4f}" for v in by_zone))
