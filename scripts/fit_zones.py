@@ -5,6 +5,7 @@ writes nothing.
     python scripts/fit_zones.py                  # start from the config's rig
     python scripts/fit_zones.py --config other.yaml
     python scripts/fit_zones.py --features ../shared/denali-assets/feature_stats
+    python scripts/fit_zones.py --features ../shared/denali-assets/feature_stats --family-floor
 
 How `rig.photometry`'s emission, flux, saturation, floor and slow tail were
 fitted (docs/rig_zones.md): least squares on the nine zones' log mean counts
@@ -36,6 +37,13 @@ time constant, the SPADs' dead time, the receiver's glare, the flood's
 profile order and its vertical width apart from the receiver's aspect.
 Layers 2 and 3 are not fitted: the final report gives them, held out
 (`rig.feature_moments`). `--max-nfev` bounds the evaluations.
+
+`--family-floor` (with `--features`) is a diagnostic, never the config's
+fit: it frees four more terms (the pulse's jitter and fast tail, the beam's
+pitch, the vignetting power) and adds every net's and layer's distance to
+the objective, layers 2 and 3 included, so the fit reports how close the
+rig's physical terms can come to the real moments at all, and which fitted
+yardstick and check they give up to get there.
 """
 
 from __future__ import annotations
@@ -64,6 +72,8 @@ ZONE_SCALE = 0.07
 LOG_ZONE_SCALE = 0.05
 VAR_SCALE = 0.15
 GROUP_WEIGHT = 5
+# --family-floor: every (net, layer)'s sqrt(distance) times this
+FAMILY_WEIGHT = 3.0
 ASPECT = geo.SENSOR_FOV_DEG[1] / geo.SENSOR_FOV_DEG[0]
 # (name, low, high, scale) of each centre-zone check's penalty
 CHECKS = (
@@ -83,12 +93,14 @@ CHECKS = (
 
 def to_photometry(base: H.Photometry, v: np.ndarray) -> H.Photometry:
     """The 8 zone parameters, then (with --features) room light, slow tail's
-    time constant, dead time, glare, the flood's order and vertical width."""
+    time constant, dead time, glare, the flood's order and vertical width,
+    then (with --family-floor) the pulse's jitter and fast tail, the beam's
+    pitch and the vignetting power."""
     flood, core_logit, core, yaw, flux, sat, dark, slow_logit = v[:8]
     vertical = np.exp(flood) * ASPECT
     more = {}
     if len(v) > 8:
-        ambient, slow_bins, dead, glare_logit, order, vertical_log = v[8:]
+        ambient, slow_bins, dead, glare_logit, order, vertical_log = v[8:14]
         vertical = np.exp(vertical_log)
         more = {
             "ambient_counts": float(np.exp(ambient)),
@@ -96,6 +108,14 @@ def to_photometry(base: H.Photometry, v: np.ndarray) -> H.Photometry:
             "dead_time_counts": float(np.exp(dead)),
             "glare_share": float(expit(glare_logit)),
             "beam_order": float(np.exp(order)),
+        }
+    if len(v) > 14:
+        sigma, fast, pitch, vignetting = v[14:]
+        more |= {
+            "pulse_sigma_bins": float(np.exp(sigma)),
+            "pulse_tail_bins": float(np.exp(fast)),
+            "beam_pitch_deg": float(pitch),
+            "vignetting_power": float(np.exp(vignetting)),
         }
     phot = dataclasses.replace(
         base,
@@ -112,7 +132,7 @@ def to_photometry(base: H.Photometry, v: np.ndarray) -> H.Photometry:
     return dataclasses.replace(phot, **more)
 
 
-def from_photometry(p: H.Photometry, features: bool = False) -> np.ndarray:
+def from_photometry(p: H.Photometry, features: bool = False, family: bool = False) -> np.ndarray:
     more = (
         [
             np.log(p.ambient_counts),
@@ -125,6 +145,8 @@ def from_photometry(p: H.Photometry, features: bool = False) -> np.ndarray:
         if features
         else []
     )
+    if family:
+        more += [np.log(p.pulse_sigma_bins), np.log(p.pulse_tail_bins), p.beam_pitch_deg, np.log(p.vignetting_power)]
     return np.array(
         [
             np.log(p.beam_hwhm_deg[0]),
@@ -200,12 +222,15 @@ def feature_residuals(hist: np.ndarray, nets: list[fm.Backbone]) -> np.ndarray:
     return np.concatenate([dz] + [ratios[k] / (VAR_SCALE * np.sqrt(len(ratios[k]) / GROUP_WEIGHT)) for k in ("raw", "log_z")])
 
 
-def residuals(v: np.ndarray, base: H.Photometry, catalogue: dict, nets: list[fm.Backbone] | None = None) -> np.ndarray:
+def residuals(v: np.ndarray, base: H.Photometry, catalogue: dict, nets: list[fm.Backbone] | None = None, family: bool = False) -> np.ndarray:
     means, checks, hist = measures(to_photometry(base, v), catalogue)
     zones = np.log(means / np.asarray(REAL_ZONE_MEANS)).ravel() / ZONE_SCALE
     penalties = [(max(lo - checks[name], 0) + max(checks[name] - hi, 0)) / scale for name, lo, hi, scale in CHECKS]
     features = feature_residuals(hist, nets) if nets else []
-    return np.concatenate([zones, penalties, features])
+    # each (net, layer)'s distance as a squared residual, so that their mean
+    # weighs as FAMILY_WEIGHT^2 x 54 against the rest
+    layers = FAMILY_WEIGHT * np.sqrt(fm.feature_distances(nets, hist).distance.to_numpy()) if family else []
+    return np.concatenate([zones, penalties, features, layers])
 
 
 def main() -> None:
@@ -213,15 +238,18 @@ def main() -> None:
     ap.add_argument("--config", type=Path, default=REPO / "config" / "config.yaml")
     ap.add_argument("--features", type=Path, default=None, help="the release's feature statistics folder: fit Part 7's targets too")
     ap.add_argument("--max-nfev", type=int, default=40)
+    ap.add_argument("--family-floor", action="store_true", help="diagnostic: every layer fitted, four more terms freed (never the config's fit)")
     args = ap.parse_args()
+    if args.family_floor and args.features is None:
+        ap.error("--family-floor needs --features")
     with open(args.config) as f:
         base = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
     catalogue = load_catalogue(REPO / "config" / "objects.tsv")
     nets = fm.load_backbones(args.features) if args.features else None
-    start = from_photometry(base, features=nets is not None)
+    start = from_photometry(base, features=nets is not None, family=args.family_floor)
     if nets:
         print("start: " + held_out(base, catalogue, nets), flush=True)
-    fit = least_squares(residuals, start, args=(base, catalogue, nets), diff_step=0.03, x_scale=0.3, max_nfev=args.max_nfev)
+    fit = least_squares(residuals, start, args=(base, catalogue, nets, args.family_floor), diff_step=0.03, x_scale=0.3, max_nfev=args.max_nfev)
     phot = to_photometry(base, fit.x)
     means, checks, _ = measures(phot, catalogue)
     print(f"{fit.nfev} evaluations, cost {fit.cost:.2f}, status {fit.status}")
@@ -230,10 +258,14 @@ def main() -> None:
         "core_share",
         "core_hwhm_deg",
         "beam_yaw_deg",
+        "beam_pitch_deg",
+        "vignetting_power",
         "direct_peak_counts",
         "saturation_counts",
         "dark_counts",
         "ambient_counts",
+        "pulse_sigma_bins",
+        "pulse_tail_bins",
         "slow_tail_fraction",
         "slow_tail_bins",
         "dead_time_counts",
@@ -246,12 +278,12 @@ def main() -> None:
     print("  " + "; ".join(f"{k} {v:.2f}" for k, v in zone_pattern(means).items()))
     print("  " + "; ".join(f"{k} {v:.3g}" for k, v in checks.items()))
     if nets:
-        print("fitted: " + held_out(phot, catalogue, nets))
+        print(("fitted, every layer: " if args.family_floor else "fitted: ") + held_out(phot, catalogue, nets))
 
 
 def held_out(phot: H.Photometry, catalogue: dict, nets: list[fm.Backbone]) -> str:
     """Part 7's yardsticks on the fit's expected counts: the z zone offsets
-    and every layer's distance (layers 2 and 3 are not fitted)."""
+    and every layer's distance (layers 2 and 3 are fitted only by --family-floor)."""
     _, _, hist = measures(phot, catalogue)
     s = fm.summary(fm.feature_distances(nets, hist))
     dz = fm.log_zone_means(hist) - np.ravel(REAL_LOG_ZONE_MEANS)
