@@ -31,10 +31,11 @@ the fit adds Part 7's targets on the same expected counts: each zone's mean
 of z = (log1p(counts) - 7.108) / 0.785 against Part 7's (a 0.05 z scale), and
 the layer-1 channel variances of the raw-count and the log-input nets (every
 channel's log(var / running_var), a 0.15 scale shared by each group's
-channels so that a group weighs as five residuals); and frees six more
+channels so that a group weighs as five residuals); and frees seven more
 physical terms: the room light apart from the dark counts, the slow tail's
 time constant, the SPADs' dead time, the receiver's glare, the flood's
-profile order and its vertical width apart from the receiver's aspect.
+profile order, its vertical width apart from the receiver's aspect and its
+contours' exponent.
 Layers 2 and 3 are not fitted: the final report gives them, held out
 (`rig.feature_moments`). `--max-nfev` bounds the evaluations.
 
@@ -93,14 +94,14 @@ CHECKS = (
 
 def to_photometry(base: H.Photometry, v: np.ndarray) -> H.Photometry:
     """The 8 zone parameters, then (with --features) room light, slow tail's
-    time constant, dead time, glare, the flood's order and vertical width,
-    then (with --family-floor) the pulse's jitter and fast tail, the beam's
+    time constant, dead time, glare, the flood's order, vertical width and
+    contour exponent, then (with --family-floor) the pulse's jitter and fast tail, the beam's
     pitch and the vignetting power."""
     flood, core_logit, core, yaw, flux, sat, dark, slow_logit = v[:8]
     vertical = np.exp(flood) * ASPECT
     more = {}
     if len(v) > 8:
-        ambient, slow_bins, dead, glare_logit, order, vertical_log = v[8:14]
+        ambient, slow_bins, dead, glare_logit, order, vertical_log, contour = v[8:15]
         vertical = np.exp(vertical_log)
         more = {
             "ambient_counts": float(np.exp(ambient)),
@@ -108,9 +109,11 @@ def to_photometry(base: H.Photometry, v: np.ndarray) -> H.Photometry:
             "dead_time_counts": float(np.exp(dead)),
             "glare_share": float(expit(glare_logit)),
             "beam_order": float(np.exp(order)),
+            # contours stay convex: q > 1
+            "beam_contour": float(1.0 + np.exp(contour)),
         }
-    if len(v) > 14:
-        sigma, fast, pitch, vignetting = v[14:]
+    if len(v) > 15:
+        sigma, fast, pitch, vignetting = v[15:]
         more |= {
             "pulse_sigma_bins": float(np.exp(sigma)),
             "pulse_tail_bins": float(np.exp(fast)),
@@ -141,6 +144,7 @@ def from_photometry(p: H.Photometry, features: bool = False, family: bool = Fals
             logit(p.glare_share),
             np.log(p.beam_order),
             np.log(p.beam_hwhm_deg[1]),
+            np.log(p.beam_contour - 1.0),
         ]
         if features
         else []
@@ -164,7 +168,7 @@ def from_photometry(p: H.Photometry, features: bool = False, family: bool = Fals
 
 # The light transport depends on the photometry only through the beam and
 # the receiver: kept for the latest beam, so steps in the other terms reuse it.
-BEAM = ("beam_hwhm_deg", "beam_order", "core_share", "core_hwhm_deg", "beam_yaw_deg", "beam_pitch_deg", "vignetting_power")
+BEAM = ("beam_hwhm_deg", "beam_order", "beam_contour", "core_share", "core_hwhm_deg", "beam_yaw_deg", "beam_pitch_deg", "vignetting_power")
 _transports: dict = {}
 
 
@@ -271,6 +275,7 @@ def main() -> None:
         "dead_time_counts",
         "glare_share",
         "beam_order",
+        "beam_contour",
     ):
         value = getattr(phot, name)
         print(f"  {name}: {np.round(value, 3).tolist()}")

@@ -249,6 +249,26 @@ def test_the_diffuse_term_sees_the_whole_beam(phot):
     assert phot.core(axis) == pytest.approx(phot.core_share)  # the spot sits on the core's peak
 
 
+def test_a_rectangular_flood_lights_the_field_corners_more(phot):
+    # a diffuser shaped to the receiver's rectangle (beam_contour > 2) keeps
+    # the flood's half widths on its axes but sends more light toward the
+    # field's diagonals than an ellipse does, so the corner zones gain on the edges
+    flat = dataclasses.replace(phot, beam_yaw_deg=0.0, beam_pitch_deg=0.0, core_share=0.0)
+    ellipse, rectangle = (dataclasses.replace(flat, beam_contour=q) for q in (2.0, 6.0))
+    hx, hy = np.tan(np.deg2rad(flat.beam_hwhm_deg))
+    on_axes = np.array([[hx, 0, 1], [0, hy, 1]]) / np.linalg.norm([[hx, 0, 1], [0, hy, 1]], axis=1, keepdims=True)
+    diagonal = np.array([hx, hy, 1]) / np.linalg.norm([hx, hy, 1])
+    for p in (ellipse, rectangle):
+        assert p.flood(on_axes) == pytest.approx(0.5, rel=1e-9)
+    assert rectangle.flood(diagonal) > 1.3 * ellipse.flood(diagonal)
+
+    def corner_over_edge(p):
+        m = H.expected_counts("3x3", False, [], p).mean(-1) - p.dark_counts
+        return m[[0, 0, 2, 2], [0, 2, 0, 2]].mean() / m[[0, 1, 1, 2], [1, 0, 2, 1]].mean()
+
+    assert corner_over_edge(rectangle) > 1.05 * corner_over_edge(ellipse)
+
+
 def test_zones_near_end_of_the_wall_is_brighter_like_the_real_sensor(zone_means):
     # real: column 2 (the near end of the wall, the captures' columns being
     # mirrored) ~20 % above column 0, rows top and bottom within 2 %

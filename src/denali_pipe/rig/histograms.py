@@ -73,10 +73,13 @@ class Photometry:
         their photons (its SPADs fire once per laser cycle: SPADs per zone
         x cycles, in the firmware's count units).
     read_noise_counts: Gaussian read noise on top of Poisson shot noise.
-    beam_hwhm_deg, beam_order: the flood the VCSEL's microlens array
-        spreads, an elliptical super-Gaussian 2^-(((ax / hx)^2 + (ay / hy)^2)^order)
-        of the angles ax (horizontal) and ay (vertical) from the beam axis:
-        half widths at half maximum (hx, hy) in degrees, and order (1 = Gaussian).
+    beam_hwhm_deg, beam_order, beam_contour: the flood the VCSEL's microlens
+        array spreads, a super-Gaussian 2^-(r^(2 order)) of the superelliptic
+        radius r = (|ax / hx|^q + |ay / hy|^q)^(1 / q) of the angles ax
+        (horizontal) and ay (vertical) from the beam axis: half widths at half
+        maximum (hx, hy) in degrees, order (1 = Gaussian) and the contours'
+        exponent q (2 = ellipses; larger = closer to the rectangle a
+        diffuser shapes to the receiver's field).
     core_share, core_hwhm_deg: the light that leaves the microlens array
         unspread and keeps the VCSEL's own divergence, a round Gaussian on the
         same axis (half width at half maximum, degrees): its share of the
@@ -103,6 +106,7 @@ class Photometry:
     read_noise_counts: float
     beam_hwhm_deg: tuple[float, float]
     beam_order: float
+    beam_contour: float
     core_share: float
     core_hwhm_deg: float
     beam_yaw_deg: float
@@ -126,11 +130,13 @@ class Photometry:
         return self.flood(d_cam) + self.core(d_cam)
 
     def flood(self, d_cam: np.ndarray) -> np.ndarray:
-        """The flood's share of `emission` (...,). Its profile is elliptical:
-        its angles from the axis across (horizontal) and along (vertical)
-        are scaled by their own half widths."""
+        """The flood's share of `emission` (...,). Its angles from the axis
+        across (horizontal) and along (vertical) are scaled by their own half
+        widths, and its contours are superellipses of `beam_contour`."""
         ax, ay = self._beam_angles(d_cam)
-        r2 = (ax / np.deg2rad(self.beam_hwhm_deg[0])) ** 2 + (ay / np.deg2rad(self.beam_hwhm_deg[1])) ** 2
+        q = self.beam_contour
+        u, v = np.abs(ax / np.deg2rad(self.beam_hwhm_deg[0])), np.abs(ay / np.deg2rad(self.beam_hwhm_deg[1]))
+        r2 = (u**q + v**q) ** (2.0 / q)
         return (1.0 - self.core_share) * np.exp2(-(r2**self.beam_order))
 
     def core(self, d_cam: np.ndarray) -> np.ndarray:
