@@ -52,6 +52,11 @@ WALL_SAMPLES_PER_ZONE = {3: 6, 8: 2}
 # Laser-spot samples over the whole field of view for the diffuse three-bounce
 # term (smooth in p, so a coarse grid suffices).
 LASER_SAMPLES = 4
+# The flood's power over the field is integrated on a finer grid: a flood
+# with near-rectangular contours (beam_contour >> 2) has edges that the
+# spots' midpoint grid over-integrates (by 10 % at 12.7; 16 per side is
+# within 1e-4 of 128).
+FLOOD_POWER_SAMPLES = 16
 
 
 @dataclass(frozen=True)
@@ -136,8 +141,11 @@ class Photometry:
         ax, ay = self._beam_angles(d_cam)
         q = self.beam_contour
         u, v = np.abs(ax / np.deg2rad(self.beam_hwhm_deg[0])), np.abs(ay / np.deg2rad(self.beam_hwhm_deg[1]))
-        r2 = (u**q + v**q) ** (2.0 / q)
-        return (1.0 - self.core_share) * np.exp2(-(r2**self.beam_order))
+        # scaled by the larger of the two so that a near-rectangular
+        # contour (large q) does not overflow far off the axis
+        m = np.maximum(np.maximum(u, v), np.finfo(float).tiny)
+        r = m * ((u / m) ** q + (v / m) ** q) ** (1.0 / q)
+        return (1.0 - self.core_share) * np.exp2(-(r ** (2.0 * self.beam_order)))
 
     def core(self, d_cam: np.ndarray) -> np.ndarray:
         """The core's share of `emission` (...,)."""
@@ -223,9 +231,9 @@ def wall_samples(resolution: str) -> WallSamples:
 
 
 @lru_cache(maxsize=None)
-def laser_samples() -> WallSamples:
-    """The flood-lit wall as one coarse grid (a single 'zone')."""
-    return _wall_samples(1, LASER_SAMPLES)
+def laser_samples(per_side: int) -> WallSamples:
+    """The flood-lit wall as one grid (a single 'zone') of per_side^2 samples."""
+    return _wall_samples(1, per_side)
 
 
 def irradiance(ws: WallSamples, phot: Photometry) -> np.ndarray:
@@ -306,15 +314,18 @@ def transport(resolution: str, scatterers: list[Scatterer], phot: Photometry) ->
 def _lit_spots(phot: Photometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The flood-lit wall as spots for the diffuse three-bounce term: the
     coarse grid carrying the flood, plus the core as one spot on the beam
-    axis (too narrow for the grid to sample). Returns points p (P, 3), their
+    axis (too narrow for the grid to sample). The grid places the flood's
+    light; a finer grid sets its total. Returns points p (P, 3), their
     distances from the sensor r_p (P,), m, and their shares of the beam
     (P,): intensity times solid angle, sr."""
-    ls = laser_samples()
+    ls, fine = laser_samples(LASER_SAMPLES), laser_samples(FLOOD_POWER_SAMPLES)
     axis, power = phot.core_spot()
     R, _ = geo.look_at(geo.SENSOR_POSITION, geo.SENSOR_FORWARD)
     core = geo.intersect_plane(geo.SENSOR_POSITION, (axis @ R)[None], geo.WALL)
     p = np.concatenate([ls.q.reshape(-1, 3), core])
-    share = np.append((phot.flood(ls.d_cam) * ls.omega).reshape(-1), power)
+    flood = (phot.flood(ls.d_cam) * ls.omega).reshape(-1)
+    flood *= (phot.flood(fine.d_cam) * fine.omega).sum() / flood.sum()
+    share = np.append(flood, power)
     return p, np.linalg.norm(p - geo.SENSOR_POSITION, axis=-1), share
 
 
