@@ -19,7 +19,10 @@ at location 90 4.2-5.8 bins wide, the pooled log1p mean 7.0-7.2 and spread
 (`rig.measure.early_share`) 0.45-0.8 in the far corners and 0.05-0.2 beside
 the centre, as `capture_setup.png` shows it. Expected counts, no nuisances;
 the zone means over 3 locations x 2 objects (A, square; 8 in) x 2
-lightings. The flood keeps the receiver's 52:41 aspect and the core is
+lightings. The same figure's nine zones, read bar by bar (its hexagon at
+location 84, lights off), add one-sided checks on every zone's direct
+return: its half-maximum width within 1.5 bins of the figure's, its rise
+against the centre's within 2.5. The flood keeps the receiver's 52:41 aspect and the core is
 round, so 8 parameters: the flood's width, the core's share and width, the
 yaw, the flux, the saturation count, the dark floor (room light twice it)
 and the slow tail's share. The pulse's fast part, the slow tail's time
@@ -60,11 +63,11 @@ from scipy.special import expit, logit
 
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.objects import load_catalogue
-from denali_pipe.report.paper import REAL_LOG_ZONE_MEANS, REAL_ZONE_MEANS
+from denali_pipe.report.paper import REAL_FIGURE_CAPTURE, REAL_FIGURE_ZONES, REAL_LOG_ZONE_MEANS, REAL_ZONE_MEANS
 from denali_pipe.report.rig_vs_real import zone_pattern
 from denali_pipe.rig import feature_moments as fm
 from denali_pipe.rig import histograms as H
-from denali_pipe.rig.measure import early_share, measure
+from denali_pipe.rig.measure import SHAPE_FLOOR_BINS, early_share, measure
 from denali_pipe.rig.scene import design_scene
 
 REPO = Path(__file__).resolve().parents[1]
@@ -89,6 +92,14 @@ CHECKS = (
     # peak, pixels 1 and 7 (the far corners) 0.56 and 0.67, pixel 4 0.11
     ("early share, far corners", 0.45, 0.8, 0.03),
     ("early share, far edge", 0.05, 0.2, 0.03),
+)
+# capture_setup.png's nine zones read bar by bar (paper.REAL_FIGURE_ZONES on
+# paper.REAL_FIGURE_CAPTURE, lights off): each zone's direct return's
+# half-maximum width within 1.5 bins of the figure's, its rise against the
+# centre's within 2.5 (tests/test_histograms.py holds the integer readings
+# to 2 and 3)
+FIGURE_CHECKS = tuple((f"width, zone {z}", w - 1.5, w + 1.5, 0.2) for z, w in enumerate(REAL_FIGURE_ZONES["width"]) if not np.isnan(w)) + tuple(
+    (f"rise, zone {z}", r - 2.5, r + 2.5, 0.3) for z, r in enumerate(REAL_FIGURE_ZONES["half_rise"]) if z != 4
 )
 
 
@@ -172,22 +183,46 @@ BEAM = ("beam_hwhm_deg", "beam_order", "beam_contour", "core_share", "core_hwhm_
 _transports: dict = {}
 
 
-def transport(catalogue: dict, name: str, location: int, phot: H.Photometry, mount_only: bool = False) -> H.Transport:
-    """The 8 in object `name` (or its mount alone) at `location`'s design pose."""
+def transport(catalogue: dict, name: str, location: int, phot: H.Photometry, mount_only: bool = False, size: str = "8inch") -> H.Transport:
+    """The object `name` of `size` (or its mount alone) at `location`'s design pose."""
     beam = tuple(getattr(phot, k) for k in BEAM)
     if _transports.get("beam") != beam:
         _transports.clear()
         _transports["beam"] = beam
-    key = (name, location, mount_only)
+    key = (name, size, location, mount_only)
     if key not in _transports:
-        scene = design_scene(catalogue[name], "8inch", location)
+        scene = design_scene(catalogue[name], size, location)
         _transports[key] = H.transport("3x3", scene[:1] if mount_only else scene, phot)
     return _transports[key]
 
 
+def half_crossings(h: np.ndarray) -> tuple[float, float]:
+    """Where a zone's direct return (N_BINS,) first rises through half its
+    peak above the floor and how long it stays above, in fractional bins
+    (linear between bins): `zone_shape`'s half_rise and width made smooth
+    in the parameters, so that a least-squares step sees them move."""
+    above = h - np.median(h[:SHAPE_FLOOR_BINS])
+    half = 0.5 * above.max()
+    over = np.nonzero(above >= half)[0]
+    i, j = over[0], over[-1]
+    rise = i - 1 + (half - above[i - 1]) / (above[i] - above[i - 1])
+    fall = j + (above[j] - half) / (above[j] - above[j + 1])
+    return float(rise), float(fall - rise)
+
+
+def figure_checks(phot: H.Photometry, catalogue: dict) -> dict[str, float]:
+    """FIGURE_CHECKS' values on the figure's capture, by their names."""
+    name, size, location = REAL_FIGURE_CAPTURE
+    zones = H.counts_from_transport("3x3", False, transport(catalogue, name, location, phot, size=size), phot).reshape(9, -1)
+    crossings = [half_crossings(h) for h in zones]
+    out = {f"width, zone {z}": crossings[z][1] for z in range(9)}
+    out |= {f"rise, zone {z}": crossings[z][0] - crossings[4][0] for z in range(9)}
+    return {name: out[name] for name, *_ in FIGURE_CHECKS}
+
+
 def measures(phot: H.Photometry, catalogue: dict) -> tuple[np.ndarray, dict, np.ndarray]:
-    """The zone means (3, 3), the centre-zone checks by CHECKS' names, and
-    the expected counts they come from (12, 9, N_BINS)."""
+    """The zone means (3, 3), the checks by CHECKS' and FIGURE_CHECKS'
+    names, and the expected counts the zone means come from (12, 9, N_BINS)."""
 
     rng = np.random.default_rng(0)
     means, logs, hists = [], [], []
@@ -208,7 +243,8 @@ def measures(phot: H.Photometry, catalogue: dict) -> tuple[np.ndarray, dict, np.
     eight = H.counts_from_transport("3x3", False, transport(catalogue, "8", 90, phot), phot)[1, 1]
     width = measure(eight, H.counts_from_transport("3x3", False, transport(catalogue, "8", 90, phot, mount_only=True), phot)[1, 1]).bump_fwhm
     values = (b.floor_fraction, b.late_over_floor, c.bump_fraction, c.bump_over_floor, width, np.mean(logs), np.std(logs), corners, early_share(zones, 3))
-    return np.mean(means, 0), dict(zip([name for name, *_ in CHECKS], values)), np.asarray(hists)
+    checks = dict(zip([name for name, *_ in CHECKS], values)) | figure_checks(phot, catalogue)
+    return np.mean(means, 0), checks, np.asarray(hists)
 
 
 def layer1_log_ratios(nets: list[fm.Backbone], hist: np.ndarray) -> dict[str, np.ndarray]:
@@ -229,7 +265,7 @@ def feature_residuals(hist: np.ndarray, nets: list[fm.Backbone]) -> np.ndarray:
 def residuals(v: np.ndarray, base: H.Photometry, catalogue: dict, nets: list[fm.Backbone] | None = None, family: bool = False) -> np.ndarray:
     means, checks, hist = measures(to_photometry(base, v), catalogue)
     zones = np.log(means / np.asarray(REAL_ZONE_MEANS)).ravel() / ZONE_SCALE
-    penalties = [(max(lo - checks[name], 0) + max(checks[name] - hi, 0)) / scale for name, lo, hi, scale in CHECKS]
+    penalties = [(max(lo - checks[name], 0) + max(checks[name] - hi, 0)) / scale for name, lo, hi, scale in CHECKS + FIGURE_CHECKS]
     features = feature_residuals(hist, nets) if nets else []
     # each (net, layer)'s distance as a squared residual, so that their mean
     # weighs as FAMILY_WEIGHT^2 x 54 against the rest

@@ -84,6 +84,8 @@ REAL_CENTRE_ZONE = {
 # the centre zone's. Pixels 1 and 2 (zones 0 and 1) have their tops under the
 # figure's label: their widths, tails and near-field shares are bounds, NaN here.
 _NAN = float("nan")
+# the plotted capture as the rig stages it: object, size, gantry location
+REAL_FIGURE_CAPTURE = ("hexagon", "8inch", 84)
 REAL_FIGURE_ZONES = {
     "half_rise": (-1, 0, -2, 7, 0, 0, 0, 1, 0),
     "width": (_NAN, _NAN, 4, 6, 7, 3, 17, 8, 4),
