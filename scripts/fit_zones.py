@@ -23,9 +23,9 @@ lightings. The same figure's nine zones, read bar by bar (its hexagon at
 location 84, lights off), add one-sided checks on every zone's direct
 return: its half-maximum width within 1.5 bins of the figure's, its rise
 against the centre's within 2.5. The flood keeps the receiver's 52:41
-aspect and the core is round, so 8 parameters: the flood's width, the core's share and width, the
-yaw, the flux, the saturation count, the dark floor (room light twice it)
-and the slow tail's share. The pulse's fast part, the slow tail's time
+aspect and the core is round, so 8 parameters: the flood's width, the
+core's share and width, the yaw, the flux, the saturation count, the dark
+floor (room light twice it) and the slow tail's share. The pulse's fast part, the slow tail's time
 constant, the dead time, the glare and the vignetting stay as configured.
 A few minutes on one core.
 
