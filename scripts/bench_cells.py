@@ -30,7 +30,7 @@ import torch
 import yaml
 
 from denali_pipe.train.cells import TASKS, Cell
-from denali_pipe.train.training import Hyper, cpu_has_amx, run_cell, training_device, training_precision
+from denali_pipe.train.training import Hyper, cpu_has_native_bf16, run_cell, training_device, training_precision
 
 REPO = Path(__file__).resolve().parents[1]
 SHAPES, SIZES, LIGHTS, LOCATIONS, REPEATS = 30, ("4inch", "8inch"), ("on", "off"), 100, 3
@@ -62,7 +62,7 @@ def main() -> None:
     p.add_argument("--threads", type=int, default=cfg["train"]["threads"], help="torch CPU threads")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
-    precision = training_precision(args.precision, args.device, cpu_has_amx())
+    precision = training_precision(args.precision, args.device, cpu_has_native_bf16())
     where = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else f"CPU, {args.threads} thread(s)"
     x, samples = paper_benchmark(cfg["seed"])
     print(f"Table 2 cells at the paper's 3x3 size ({len(samples):,} samples, {BINS} bins), {args.epochs} epoch(s) each; {where}; "

@@ -2,7 +2,7 @@
 """Benchmark training throughput of the four models; prints a table, asserts nothing.
 
     python scripts/bench_models.py               # 2 CPU threads, 3x3 zones
-    python scripts/bench_models.py --threads 1 --precision bfloat16   # as a cell under train.precision auto on AMX
+    python scripts/bench_models.py --threads 1 --precision bfloat16   # as a cell under train.precision auto on AMX or AVX-512 BF16
     python scripts/bench_models.py --device cuda --precision bfloat16  # on the first GPU
     OMP_WAIT_POLICY=PASSIVE python scripts/bench_models.py   # on a busy machine
 

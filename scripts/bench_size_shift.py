@@ -48,7 +48,7 @@ from denali_pipe.train.metrics import regression_metrics, workspace_metrics
 from denali_pipe.train.models import cnn1d
 from denali_pipe.train.training import (
     Hyper,
-    cpu_has_amx,
+    cpu_has_native_bf16,
     fit,
     infer,
     loss_for,
@@ -117,7 +117,7 @@ def main() -> None:
     args = p.parse_args()
     if args.keep_noise and max(args.test_gains) > 1:
         p.error("--keep-noise adds noise back to a dimmed size; it cannot take it out of a brightened one (a gain above 1)")
-    precision = training_precision(args.precision, "cpu", cpu_has_amx())
+    precision = training_precision(args.precision, "cpu", cpu_has_native_bf16())
     x, samples, _ = read_dataset(args.dataset.with_suffix(".zarr"), args.dataset.with_suffix(".parquet"))
     y = samples[["x", "y"]].to_numpy(np.float32)
     totals = samples.assign(total=x.reshape(len(x), -1).sum(axis=1)).groupby("size")["total"].mean()

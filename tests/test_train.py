@@ -164,19 +164,19 @@ def test_training_device_is_the_gpu_whenever_torch_sees_one():
     assert training_device(cuda_available=False) == "cpu"
 
 
-def test_training_precision_is_bfloat16_only_where_auto_finds_amx_or_it_is_asked_for():
-    # `denali train` passes torch's AMX probe: a flag, so every branch runs on any CPU
-    assert training_precision("auto", "cpu", cpu_has_amx=True) == torch.bfloat16
-    assert training_precision("auto", "cpu", cpu_has_amx=False) == torch.float32
-    assert training_precision("auto", "cuda", cpu_has_amx=True) == torch.float32
-    assert training_precision("bfloat16", "cpu", cpu_has_amx=False) == torch.bfloat16
-    assert training_precision("float32", "cpu", cpu_has_amx=True) == torch.float32
+def test_training_precision_is_bfloat16_only_where_auto_finds_native_bfloat16_or_it_is_asked_for():
+    # `denali train` passes torch's AMX and AVX-512 BF16 probes: a flag, so every branch runs on any CPU
+    assert training_precision("auto", "cpu", cpu_has_native_bf16=True) == torch.bfloat16
+    assert training_precision("auto", "cpu", cpu_has_native_bf16=False) == torch.float32
+    assert training_precision("auto", "cuda", cpu_has_native_bf16=True) == torch.float32
+    assert training_precision("bfloat16", "cpu", cpu_has_native_bf16=False) == torch.bfloat16
+    assert training_precision("float32", "cpu", cpu_has_native_bf16=True) == torch.float32
     with pytest.raises(ValueError, match="unknown precision 'half'"):
-        training_precision("half", "cpu", cpu_has_amx=True)
+        training_precision("half", "cpu", cpu_has_native_bf16=True)
 
 
 def test_a_bfloat16_cell_learns_keeps_float32_weights_and_records_its_precision(data):
-    # bfloat16 autocast runs on any CPU (emulated without AMX): the same cell as in float32 must still learn
+    # bfloat16 autocast runs on any CPU (emulated without AMX or AVX-512 BF16): the same cell as in float32 must still learn
     x, samples = data
     res = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory(), precision=torch.bfloat16)
     m = res.metrics

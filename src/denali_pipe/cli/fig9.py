@@ -21,7 +21,7 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     from denali_pipe.experiments.fig9 import run_fig9
     from denali_pipe.report.fig9 import write_fig9
     from denali_pipe.train.dataset import location_labels
-    from denali_pipe.train.training import Hyper, cpu_has_amx, training_precision
+    from denali_pipe.train.training import Hyper, cpu_has_native_bf16, training_precision
     from denali_pipe.transforms.sim_to_real import read_fit_check, read_transforms
 
     torch.set_num_threads(args.threads)
@@ -44,7 +44,7 @@ def cmd_fig9(args: argparse.Namespace) -> None:
         args.config["fit"],
         Hyper(**args.hyper),
         args.config["seed"],
-        training_precision(args.precision, "cpu", cpu_has_amx()),
+        training_precision(args.precision, "cpu", cpu_has_native_bf16()),
     )
     out = Path(args.out)
     table = write_fig9(runs, out, out.with_suffix(".csv"))
@@ -61,7 +61,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--hyper", type=json_arg, required=True, help='JSON {"lr", "epochs", "batch_size", "norm"} of the localiser')
     s.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     s.add_argument(
-        "--precision", choices=PRECISIONS, default="float32", help="the localisers' training dtype (config train.precision; auto: bfloat16 on a CPU with AMX)"
+        "--precision",
+        choices=PRECISIONS,
+        default="float32",
+        help="the localisers' training dtype (config train.precision; auto: bfloat16 on a CPU that multiplies it natively)",
     )
     s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
     s.set_defaults(func=cmd_fig9)

@@ -184,28 +184,30 @@ def partition(samples: pd.DataFrame, y: np.ndarray, cell: Cell, validation_fract
     return Split(inner.train, split.test), inner.test
 
 
-def training_precision(setting: str, device: str, cpu_has_amx: bool) -> torch.dtype:
+def training_precision(setting: str, device: str, cpu_has_native_bf16: bool) -> torch.dtype:
     """The dtype a network's training passes and its per-epoch validation
     (model selection) compute in (`torch.autocast`; weights, gradients, the
     optimiser and the test split's predictions stay float32).
 
-    setting: config `train.precision`. `auto` is bfloat16 on a CPU with AMX
-    tiles, whose matrix units multiply bfloat16 natively (the 1D CNN trains
-    2.0-2.7x faster there, the 3D CNN 4x; docs/performance.md), and
-    float32 elsewhere: without AMX, bfloat16 is emulated and gains little,
-    and on CUDA (an H200, measured) these launch-bound networks train no
-    faster in it."""
+    setting: config `train.precision`. `auto` is bfloat16 on a CPU that
+    multiplies bfloat16 natively (`cpu_has_native_bf16`: the 1D CNN trains
+    2.0-2.7x faster on AMX, 2.0x on AVX-512 BF16, the 3D CNN 4x on AMX;
+    docs/performance.md), and float32 elsewhere: without those instructions
+    bfloat16 is emulated and gains little, and on CUDA (an H200, measured)
+    these launch-bound networks train no faster in it."""
     if setting not in PRECISIONS:
         raise ValueError(f"unknown precision {setting!r}; expected one of {PRECISIONS}")
     if setting == "auto":
-        return torch.bfloat16 if device == "cpu" and cpu_has_amx else torch.float32
+        return torch.bfloat16 if device == "cpu" and cpu_has_native_bf16 else torch.float32
     return getattr(torch, setting)
 
 
-def cpu_has_amx() -> bool:
-    """Whether this CPU has AMX tiles (Intel Sapphire Rapids and later): a
-    private torch function, so torch's pin (pyproject.toml) keeps it."""
-    return torch.cpu._is_amx_tile_supported()
+def cpu_has_native_bf16() -> bool:
+    """Whether this CPU multiplies bfloat16 natively, which oneDNN's kernels
+    use under autocast: AMX tiles (Intel Sapphire Rapids and later) or
+    AVX-512 BF16's dot products (Intel Cooper Lake and later, AMD Zen 4 and
+    later). Private torch functions, so torch's pin (pyproject.toml) keeps them."""
+    return torch.cpu._is_amx_tile_supported() or torch.cpu._is_avx512_bf16_supported()
 
 
 def training_device(cuda_available: bool) -> str:
@@ -401,7 +403,7 @@ def run_cell(
     def evaluate_epoch(epoch: int, seen: np.ndarray, out: np.ndarray) -> float:
         # training metrics from the epoch's own (train-mode) outputs: free, as the paper's curves
         rows.extend(metric_rows(epoch, "train", task_metrics(cell.task, to_metres(out, target_stats), y[split.train][seen])))
-        # selection scores in the training precision (half the time of float32 on AMX); the test split's in float32
+        # selection scores in the training precision (half the time of float32 where bfloat16 is native); the test split's in float32
         sel = task_metrics(cell.task, to_metres(infer(model, x_sel, dev, precision), target_stats), y_sel)
         rows.extend(metric_rows(epoch, select_on[0], sel))
         return sign * sel[metric]
