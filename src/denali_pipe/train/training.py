@@ -310,7 +310,7 @@ def fit(
 
     Progress goes to a tqdm bar when stderr is a terminal and to one log line
     per epoch otherwise. The model ends in the selected state."""
-    # fused: one kernel per step for all parameters (the same update; a per-tensor loop cost 4 % of a 1D CNN step)
+    # fused: one kernel per step for all parameters (the same update rule; a per-tensor loop cost 4 % of a 1D CNN step)
     opt = torch.optim.Adam(model.parameters(), lr=hp.lr, fused=True)
     gen = torch.Generator().manual_seed(seed)
     best_score, best_epoch, best_state = -np.inf, 0, None
