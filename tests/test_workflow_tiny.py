@@ -452,6 +452,11 @@ def test_twin_calibration(tiny_run):
     assert before.shape == after.shape == (3, 3) and after.mean() < before.mean()
     noise = np.array(c["residual"]["after"]["nl2_noise"])  # what the noise alone leaves: no twin scores far below it
     assert noise.shape == (3, 3) and (noise > 0).all() and (after > 0.8 * noise).all()
+    net, interval = np.array(c["residual"]["after"]["nl2_net"], float), np.array(c["residual"]["after"]["nl2_net_interval"], float)
+    finite = np.isfinite(net)  # nan where a zone's noise holds all of its captures
+    below = finite & (after <= 1)  # there taking the noise's share out of both norms lowers the ratio
+    assert finite.any() and (net[below] <= after[below] + 1e-12).all()
+    assert (interval[finite, 0] <= net[finite]).all() and (net[finite] <= interval[finite, 1]).all()
     assert c["n_test_excluded"] > 0 and (tiny_run / "results/twin_calibration.png").stat().st_size > 10_000
     assert 0 < c["fit"]["evaluations"] <= 20  # the tiny preset's budget
     twins = sorted((tiny_run / "results/twin_calibrated").glob("*.zarr"))

@@ -362,8 +362,12 @@ class Problem:
         kept = kept_bins(self.y, axis=0)
         self.kept = (kept | ~kept.any(axis=1, keepdims=True))[None]
         n_kept = len(self.y) * self.kept.sum(axis=(0, 2))
+        # (N, Z): each capture's expected squared noise in its repeat mean over
+        # its kept bins (the repeats' unbiased variance / R); None without repeats
+        self.noise_energy = None
         if R > 1:
-            self.sigma = np.sqrt((real.var(axis=1, ddof=1) * self.kept).sum(axis=(0, 2)) / n_kept / R)
+            self.noise_energy = (real.var(axis=1, ddof=1) * self.kept).sum(axis=2) / R
+            self.sigma = np.sqrt(self.noise_energy.sum(axis=0) / n_kept)
         else:
             self.sigma = np.sqrt((self.y**2 * self.kept).sum(axis=(0, 2)) / n_kept)
         self.sigma = np.maximum(self.sigma, 1e-9)
@@ -517,21 +521,50 @@ def to_physical(x: np.ndarray, settings: dict) -> dict:
     return out | {k: tail[k] for k in tail_names(settings)}
 
 
-def zone_residuals(problem: Problem, x: np.ndarray, gains: np.ndarray) -> dict:
+def nl2_net_of_noise(err2: np.ndarray, signal2: np.ndarray, noise2: np.ndarray) -> np.ndarray:
+    """The twin's own residual, the noise's share taken out, squared and
+    signed: (||y - t||^2 - E||noise||^2) / (||y||^2 - E||noise||^2), an
+    unbiased-numerator estimate of ||mu - t||^2 / ||mu||^2 for the captures'
+    expected histograms mu, since a held-out capture's noise is independent
+    of its twin (E||y - t||^2 = ||mu - t||^2 + E||noise||^2, and likewise
+    ||y||^2). Below 0 where the residual is within the noise (kept signed so
+    that its bootstrap is not clipped); nan where the noise holds all of y.
+    Arguments summed over captures, any matching shape."""
+    signal = signal2 - noise2
+    return np.where(signal > 0, (err2 - noise2) / np.where(signal > 0, signal, 1.0), np.nan)
+
+
+def zone_residuals(problem: Problem, x: np.ndarray, gains: np.ndarray, rng: np.random.Generator) -> dict:
     """Per zone (3, 3): nl2 = ||y - g m|| / ||y||; nl2_noise, the nl2 the
     noise of the repeat means alone leaves (what a twin exact to the last
     photon would score: sqrt(kept bins) sigma / ||y||, so a zone whose
-    captures hold little object return cannot score below it); and chi2 =
-    mean squared noise-weighted residual over the kept bins (1: as close as
-    the noise allows)."""
+    captures hold little object return cannot score below it); nl2_net, the
+    twin's own nl2 with the noise's share taken out (the square root of
+    `nl2_net_of_noise`, from each capture's repeats, 0 within the noise),
+    and nl2_net_interval (3, 3, 2), its bootstrap percentile interval over
+    the captures at `calibration.level` (`calibration.bootstrap_resamples`
+    draws from rng; None both, without repeats); and chi2 = mean squared
+    noise-weighted residual over the kept bins (1: as close as the noise
+    allows). A floor offset's misreading (`Problem.take_floor_offsets`) is
+    not in the repeats' noise, so it counts against the twin in nl2_net."""
     r = problem.residuals(x, gains)  # 0 in the bins the captures do not keep
     kept = len(problem.y) * problem.kept[0].sum(axis=1)
-    norm_y = np.linalg.norm(problem.y.transpose(1, 0, 2).reshape(ZONES, -1), axis=1)
-    nl2 = np.linalg.norm((r * problem.sigma[None, :, None]).transpose(1, 0, 2).reshape(ZONES, -1), axis=1) / norm_y
-    noise = np.sqrt(kept) * problem.sigma / norm_y
+    err2 = ((r * problem.sigma[None, :, None]) ** 2).sum(axis=2)  # (N, Z)
+    signal2 = (problem.y**2).sum(axis=2)
+    nl2 = np.sqrt(err2.sum(axis=0) / signal2.sum(axis=0))
+    noise = np.sqrt(kept) * problem.sigma / np.sqrt(signal2.sum(axis=0))
     chi2 = (r**2).transpose(1, 0, 2).reshape(ZONES, -1).sum(axis=1) / np.maximum(kept, 1)
-    grid = lambda v: v.reshape(GRID, GRID).tolist()  # noqa: E731
-    return {"nl2": grid(nl2), "nl2_noise": grid(noise), "chi2": grid(chi2)}
+    grid = lambda v: None if v is None else np.where(np.isfinite(v), v, None).reshape(GRID, GRID, *v.shape[1:]).tolist()  # noqa: E731
+    net = interval = None
+    if problem.noise_energy is not None:
+        c, noise2 = problem.settings["calibration"], problem.noise_energy
+        root = lambda v: np.sqrt(np.clip(v, 0.0, None))  # noqa: E731
+        net = root(nl2_net_of_noise(err2.sum(axis=0), signal2.sum(axis=0), noise2.sum(axis=0)))
+        draw = rng.integers(0, len(err2), (c["bootstrap_resamples"], len(err2)))
+        boots = nl2_net_of_noise(err2[draw].sum(axis=1), signal2[draw].sum(axis=1), noise2[draw].sum(axis=1))
+        tails = (50 * (1 - c["level"]), 50 * (1 + c["level"]))
+        interval = root(np.stack([np.nanpercentile(b, tails) if np.isfinite(b).any() else [np.nan] * 2 for b in boots.T]))
+    return {"nl2": grid(nl2), "nl2_noise": grid(noise), "nl2_net": grid(net), "nl2_net_interval": grid(interval), "chi2": grid(chi2)}
 
 
 def nuisance_fit(problem: Problem, x: np.ndarray) -> np.ndarray:
@@ -591,7 +624,7 @@ def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict,
     boots = linearised_bootstrap(problem, x, gains, c["bootstrap_resamples"], rng)
     u = uncertainty(x, boots, settings, c["level"])
     result = Result(
-        x, gains, zone_residuals(held, x_before, gains_before), zone_residuals(held, x, gains), u.se, u.interval, u.not_identified, u.at_bound,
+        x, gains, zone_residuals(held, x_before, gains_before, rng), zone_residuals(held, x, gains, rng), u.se, u.interval, u.not_identified, u.at_bound,
         x_before, gains_before, fit_record,
     )  # fmt: skip
     return result, problem, held
