@@ -131,6 +131,27 @@ def test_real_samples_saved_in_the_table(tmp_path):
     assert noisy.at[50, "control_n_same_rmse"] == "<=10" and noisy.at[50, "real_samples_saved"] == "<=-40"
 
 
+def test_real_samples_saved_spread_over_seeds(tmp_path):
+    """Each seed's twins against its own control: seed 1 saves 30 at n 0
+    (0.08 against its control's 0.10 -> 0.06 over 10 -> 50), seed 2 saves
+    40 (0.06 against 0.12 -> 0.04): std 7; at n 10 seed 2's control is
+    never as good, a bound, so no spread is given."""
+    curves = {
+        CONTROL: {1: ((10, 0.10), (50, 0.06)), 2: ((10, 0.12), (50, 0.04))},
+        "noisy": {1: ((0, 0.08), (10, 0.07)), 2: ((0, 0.06), (10, 0.03))},
+        MEAN_BASELINE: {1: ((0, 0.11),), 2: ((0, 0.11),)},
+    }
+    rows = [
+        {"panel": "centre", "fidelity": f, "n_real": n, CAPPED: "", "seed": seed, "n_sim": 5 if f == "noisy" else 0, "n_test": 9,
+         "rmse": r, "mse": r * r, "mae": r, "rmse_euclidean": r}
+        for f, by_seed in curves.items() for seed, curve in by_seed.items() for n, r in curve
+    ]  # fmt: skip
+    table = write_fig9(pd.DataFrame(rows), tmp_path / "f.png", tmp_path / "f.csv")
+    noisy = table[table["fidelity"] == "noisy"].set_index("n_real")
+    assert noisy.at[0, "real_samples_saved_std"] == "7" and noisy.at[10, "real_samples_saved_std"] == ""
+    assert (table.loc[table["fidelity"] == CONTROL, "real_samples_saved_std"] == "").all()
+
+
 def test_real_samples_never_come_from_the_test_split(data):
     pairs, xy = data
     real, _, keys = pairs.captures()

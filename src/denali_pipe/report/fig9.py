@@ -13,8 +13,10 @@ matching `_std`, n_seeds, n_sim, n_test; for the fidelities,
 control_n_same_rmse, the real samples the control needs to reach the same
 RMSE (interpolated linearly between its n; "<=" its fewest n where it is
 there already, so the need is at most that; ">max" where it never gets
-there: `samples_for`), and real_samples_saved, that less n_real (negative:
-the twins cost real samples)) beside `results/fig9.png`.
+there: `samples_for`), real_samples_saved, that less n_real (negative:
+the twins cost real samples), and real_samples_saved_std, its spread over
+seeds, each seed against its own control (`saved_spread`)) beside
+`results/fig9.png`.
 """
 
 from __future__ import annotations
@@ -88,9 +90,35 @@ def real_samples_saved(table: pd.DataFrame) -> pd.DataFrame:
     return table
 
 
+def saved_spread(runs: pd.DataFrame, table: pd.DataFrame) -> pd.DataFrame:
+    """`table` with real_samples_saved_std filled for the fidelities' rows:
+    the std over seeds (ddof 1) of the real samples saved, each seed's
+    model against that seed's own control curve (the same real samples and
+    initial weights). A string; "" where fewer than two seeds ran or a
+    seed's control gives a bound, not a number (it never gets there, or it
+    is there with its fewest n)."""
+    table = table.copy()
+    table["real_samples_saved_std"] = ""
+    controls = {k: c.sort_values("n_real") for k, c in runs[runs["fidelity"] == CONTROL].groupby(["panel", "seed"])}
+    for i in table.index[table["fidelity"].isin(FIDELITIES)]:
+        panel, fidelity, n_real = table.loc[i, ["panel", "fidelity", "n_real"]]
+        seeds = runs[(runs["panel"] == panel) & (runs["fidelity"] == fidelity) & (runs["n_real"] == n_real)]
+        saved = []
+        for seed, rmse in zip(seeds["seed"], seeds["rmse"]):
+            c = controls.get((panel, seed))
+            n = np.inf if c is None else samples_for(rmse, c["n_real"].to_numpy(float), c["rmse"].to_numpy(float))
+            if np.isinf(n) or c["rmse"].iloc[0] <= rmse:
+                break
+            saved.append(n - n_real)
+        else:
+            if len(saved) > 1:
+                table.at[i, "real_samples_saved_std"] = f"{np.std(saved, ddof=1):.0f}"
+    return table
+
+
 def write_fig9(runs: pd.DataFrame, out_png: Path, out_csv: Path) -> pd.DataFrame:
     """Aggregate the per-seed runs (`experiments.fig9.run_fig9`), write the CSV and the PNG; returns the table."""
-    table = real_samples_saved(aggregate(runs))
+    table = saved_spread(runs, real_samples_saved(aggregate(runs)))
     panels = [p for p in PANELS if p in set(table["panel"])]
     # constrained layout makes room for the legend below the panels, clear of the curves
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.2), constrained_layout=True, sharey=True, squeeze=False)
