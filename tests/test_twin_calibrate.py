@@ -149,6 +149,21 @@ def test_held_out_residual_net_of_noise_in_noisy_zones(cal, planted):
     assert interval[4, 0] > 0.15, interval  # the bright zone's interval leaves 0
 
 
+def test_without_repeats_no_net_residual_is_claimed(cal, planted, fitted, tmp_path):
+    """One repeat per capture shows no noise to take out: nl2_net and its
+    interval are None, and the figure's titles go without them."""
+    from denali_pipe.report.twin_calibration import plot_calibration
+
+    truth, captures, specs = planted
+    one = C.Captures(captures.real[:, :1], captures.keys, captures.crop_start)
+    problem = C.Problem(C.Model(cal, specs, one.keys, SETTINGS), one, SETTINGS)
+    got = C.zone_residuals(problem, truth, np.ones(9), np.random.default_rng(0))
+    assert got["nl2_net"] is None and got["nl2_net_interval"] is None and np.shape(got["nl2"]) == (3, 3)
+    result, _, held = fitted
+    plot_calibration(dataclasses.replace(result, after={**result.after, "nl2_net": None, "nl2_net_interval": None}), held, tmp_path / "c.png")
+    assert (tmp_path / "c.png").stat().st_size > 10_000
+
+
 def test_the_captures_floor_offsets_come_out_before_the_fit(cal, planted):
     """Each capture's zones shifted by their own constant (the room light
     against the background's: sd 5 % of the brightest bin here) over their

@@ -40,8 +40,9 @@ def plot_calibration(result: Result, held: Problem, out_png: Path) -> None:
         ax.plot(bins, after[z], color="tab:blue", lw=1.4, label="twin after calibration")
         ax.axhline(0, color="k", lw=0.5)
         nb, na, nn = result.before["nl2"][r][c], result.after["nl2"][r][c], result.after["nl2_noise"][r][c]
-        net, (lo, hi) = result.after["nl2_net"][r][c], result.after["nl2_net_interval"][r][c]
-        twin_own = "" if net is None else f"\ntwin's own, net of noise: {net:.2f} [{lo:.2f}, {hi:.2f}]"
+        net, interval = result.after["nl2_net"], result.after["nl2_net_interval"]
+        # none without repeats, nor where a zone's noise holds all of its captures
+        twin_own = "" if net is None or net[r][c] is None else f"\ntwin's own, net of noise: {net[r][c]:.2f} [{interval[r][c][0]:.2f}, {interval[r][c][1]:.2f}]"
         ax.set_title(f"zone ({r}, {c}): held-out residual {nb:.2f} -> {na:.2f} (noise alone {nn:.2f}){twin_own}", fontsize=8)
         ax.tick_params(labelsize=7)
         if c == 0:

@@ -542,7 +542,7 @@ def zone_residuals(problem: Problem, x: np.ndarray, gains: np.ndarray, rng: np.r
     twin's own nl2 with the noise's share taken out (the square root of
     `nl2_net_of_noise`, from each capture's repeats, 0 within the noise),
     and nl2_net_interval (3, 3, 2), its bootstrap percentile interval over
-    the captures at `calibration.level` (`calibration.bootstrap_resamples`
+    the captures at `calibration.level`, holding the estimate (`calibration.bootstrap_resamples`
     draws from rng; None both, without repeats); and chi2 = mean squared
     noise-weighted residual over the kept bins (1: as close as the noise
     allows). A floor offset's misreading (`Problem.take_floor_offsets`) is
@@ -563,7 +563,8 @@ def zone_residuals(problem: Problem, x: np.ndarray, gains: np.ndarray, rng: np.r
         draw = rng.integers(0, len(err2), (c["bootstrap_resamples"], len(err2)))
         boots = nl2_net_of_noise(err2[draw].sum(axis=1), signal2[draw].sum(axis=1), noise2[draw].sum(axis=1))
         tails = (50 * (1 - c["level"]), 50 * (1 + c["level"]))
-        interval = root(np.stack([np.nanpercentile(b, tails) if np.isfinite(b).any() else [np.nan] * 2 for b in boots.T]))
+        q = root(np.stack([np.nanpercentile(b, tails) if np.isfinite(b).any() else [np.nan] * 2 for b in boots.T]))
+        interval = np.stack([np.fmin(q[:, 0], net), np.fmax(q[:, 1], net)], axis=1)  # widened to hold the estimate, as `uncertainty`'s
     return {"nl2": grid(nl2), "nl2_noise": grid(noise), "nl2_net": grid(net), "nl2_net_interval": grid(interval), "chi2": grid(chi2)}
 
 
