@@ -71,6 +71,16 @@ def samples_for(rmse: float, control_n: np.ndarray, control_rmse: np.ndarray) ->
     return float("inf")
 
 
+def _saved(rmse: float, n_real: int, control: pd.DataFrame) -> tuple[float, bool]:
+    """The real samples a model of `rmse` at `n_real` saves against a control
+    curve (rows n_real, rmse): (samples_for(...) - n_real, whether that is a
+    bound: the control is there with its fewest n already, so it needs at
+    most those). inf where the control never gets there."""
+    c = control.sort_values("n_real")
+    n = samples_for(rmse, c["n_real"].to_numpy(float), c["rmse"].to_numpy(float))
+    return n - n_real, bool(c["rmse"].iloc[0] <= rmse)
+
+
 def real_samples_saved(table: pd.DataFrame) -> pd.DataFrame:
     """`table` with control_n_same_rmse and real_samples_saved filled for the
     fidelities' rows (strings: a number of samples, or NEVER)."""
@@ -78,15 +88,14 @@ def real_samples_saved(table: pd.DataFrame) -> pd.DataFrame:
     table["control_n_same_rmse"] = ""
     table["real_samples_saved"] = ""
     for _, g in table.groupby("panel", sort=False):
-        c = g[g["fidelity"] == CONTROL].sort_values("n_real")
-        if c.empty:
+        control = g[g["fidelity"] == CONTROL]
+        if control.empty:
             continue
-        fewest = float(c["rmse"].iloc[0])
         for i in g.index[g["fidelity"].isin(FIDELITIES)]:
-            n = samples_for(table.at[i, "rmse"], c["n_real"].to_numpy(float), c["rmse"].to_numpy(float))
-            bound = AT_MOST if fewest <= table.at[i, "rmse"] else ""
-            table.at[i, "control_n_same_rmse"] = NEVER if np.isinf(n) else f"{bound}{n:.0f}"
-            table.at[i, "real_samples_saved"] = NEVER if np.isinf(n) else f"{bound}{n - table.at[i, 'n_real']:.0f}"
+            saved, bounded = _saved(table.at[i, "rmse"], table.at[i, "n_real"], control)
+            bound = AT_MOST if bounded else ""
+            table.at[i, "control_n_same_rmse"] = NEVER if np.isinf(saved) else f"{bound}{saved + table.at[i, 'n_real']:.0f}"
+            table.at[i, "real_samples_saved"] = NEVER if np.isinf(saved) else f"{bound}{saved:.0f}"
     return table
 
 
@@ -99,20 +108,16 @@ def saved_spread(runs: pd.DataFrame, table: pd.DataFrame) -> pd.DataFrame:
     is there with its fewest n)."""
     table = table.copy()
     table["real_samples_saved_std"] = ""
-    controls = {k: c.sort_values("n_real") for k, c in runs[runs["fidelity"] == CONTROL].groupby(["panel", "seed"])}
+    controls = dict(tuple(runs[runs["fidelity"] == CONTROL].groupby(["panel", "seed"])))
+    models = runs.groupby(["panel", "fidelity", "n_real"])
     for i in table.index[table["fidelity"].isin(FIDELITIES)]:
         panel, fidelity, n_real = table.loc[i, ["panel", "fidelity", "n_real"]]
-        seeds = runs[(runs["panel"] == panel) & (runs["fidelity"] == fidelity) & (runs["n_real"] == n_real)]
-        saved = []
-        for seed, rmse in zip(seeds["seed"], seeds["rmse"]):
-            c = controls.get((panel, seed))
-            n = np.inf if c is None else samples_for(rmse, c["n_real"].to_numpy(float), c["rmse"].to_numpy(float))
-            if np.isinf(n) or c["rmse"].iloc[0] <= rmse:
-                break
-            saved.append(n - n_real)
-        else:
-            if len(saved) > 1:
-                table.at[i, "real_samples_saved_std"] = f"{np.std(saved, ddof=1):.0f}"
+        seeds = models.get_group((panel, fidelity, n_real))
+        saved = [
+            _saved(rmse, n_real, controls[(panel, seed)]) if (panel, seed) in controls else (np.inf, False) for seed, rmse in zip(seeds["seed"], seeds["rmse"])
+        ]
+        if len(saved) > 1 and not any(np.isinf(n) or bounded for n, bounded in saved):
+            table.at[i, "real_samples_saved_std"] = f"{np.std([n for n, _ in saved], ddof=1):.0f}"
     return table
 
 
