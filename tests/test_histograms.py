@@ -312,6 +312,28 @@ def test_every_zone_rises_when_and_lasts_as_long_as_the_release_capture(phot, mi
     assert np.abs(np.array([s["width"] for s in shapes])[read] - real[read]).max() <= 2
 
 
+def test_light_outlasts_the_direct_return_by_the_lasers_slow_tail(phot, mid_scene):
+    # Every panel of capture_setup.png read (paper.REAL_FIGURE_ZONES) holds
+    # light above its early floor 15-29 bins after its direct return, 0.010
+    # of the peak in the centre. The pulse's fast part is long gone by then
+    # and the dead time lowers the late bins, so without the VCSEL's slow
+    # tail (carrier diffusion, afterglow) the centre falls below its floor.
+    # The centre panel's direct peak is 123 px tall: a reading is good to a
+    # pixel.
+    pixel = 1 / 123
+
+    def tails(p):
+        counts = H.expected_counts("3x3", False, mid_scene(*paper.REAL_FIGURE_CAPTURE), p).reshape(9, -1)
+        return np.array([zone_shape(h)["tail_15_29"] for h in counts])
+
+    real = np.array(paper.REAL_FIGURE_ZONES["tail_15_29"])
+    read = ~np.isnan(real)
+    rig = tails(phot)
+    assert np.all(rig[read] > 0)
+    assert abs(rig[4] - real[4]) <= pixel
+    assert tails(dataclasses.replace(phot, slow_tail_fraction=0.0))[4] < 0
+
+
 def test_far_column_holds_the_bright_zones_return_early_by_glare(phot):
     # capture_setup.png's far column: pixels 1 and 7 (the far corners) show
     # a first peak at the other columns' direct return, 0.56 and 0.67 of
