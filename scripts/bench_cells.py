@@ -30,7 +30,8 @@ import torch
 import yaml
 
 from denali_pipe.train.cells import TASKS, Cell
-from denali_pipe.train.training import Hyper, cpu_has_native_bf16, run_cell, training_device, training_precision
+from denali_pipe.train.precision import cpu_has_native_bf16
+from denali_pipe.train.training import Hyper, run_cell, training_device
 
 REPO = Path(__file__).resolve().parents[1]
 SHAPES, SIZES, LIGHTS, LOCATIONS, REPEATS = 30, ("4inch", "8inch"), ("on", "off"), 100, 3
@@ -62,11 +63,10 @@ def main() -> None:
     p.add_argument("--threads", type=int, default=cfg["train"]["threads"], help="torch CPU threads")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
-    precision = training_precision(args.precision, args.device, cpu_has_native_bf16())
     where = torch.cuda.get_device_name(args.device) if args.device.startswith("cuda") else f"CPU, {args.threads} thread(s)"
     x, samples = paper_benchmark(cfg["seed"])
     print(f"Table 2 cells at the paper's 3x3 size ({len(samples):,} samples, {BINS} bins), {args.epochs} epoch(s) each; {where}; "
-          f"{str(precision).removeprefix('torch.')}; torch {torch.__version__}")  # fmt: skip
+          f"train.precision {args.precision}; torch {torch.__version__}")  # fmt: skip
     rows = []
     for name in args.models:
         for task in args.tasks:
@@ -74,10 +74,11 @@ def main() -> None:
             hp = dataclasses.replace(full, epochs=min(args.epochs, full.epochs))
             cell = Cell(name, task, "random", "3x3", cfg["train"]["protocol"], cfg["seed"])
             t0 = time.perf_counter()
-            m = run_cell(x, samples, cell, hp, cfg["train"]["validation_fraction"], models[name]["factory"], args.device, None, precision).metrics
+            m = run_cell(x, samples, cell, hp, cfg["train"]["validation_fraction"], models[name]["factory"], args.device, None, args.precision,
+                         cpu_has_native_bf16()).metrics  # fmt: skip
             wall = time.perf_counter() - t0
             per_epoch = wall / m.epochs_run
-            rows.append({"model": name, "task": task, "batch": hp.batch_size, "n_train": m.n_train, "epochs_run": m.epochs_run,
+            rows.append({"model": name, "task": task, "precision": m.precision, "batch": hp.batch_size, "n_train": m.n_train, "epochs_run": m.epochs_run,
                          "train_s_per_epoch": m.train_seconds / m.epochs_run, "wall_s_per_epoch": per_epoch,
                          "train_samples_per_s": m.train_samples_per_second, "paper_epochs": full.epochs,
                          "projected_cell_min": per_epoch * full.epochs / 60})  # fmt: skip

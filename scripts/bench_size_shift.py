@@ -42,13 +42,14 @@ import numpy as np
 import pandas as pd
 import torch
 
+from denali_pipe.experiments.fig9 import localiser_precision
 from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train.dataset import read_dataset
 from denali_pipe.train.metrics import regression_metrics, workspace_metrics
 from denali_pipe.train.models import cnn1d
+from denali_pipe.train.precision import cpu_has_native_bf16
 from denali_pipe.train.training import (
     Hyper,
-    cpu_has_native_bf16,
     fit,
     infer,
     loss_for,
@@ -56,7 +57,6 @@ from denali_pipe.train.training import (
     standardise,
     target_statistics,
     to_metres,
-    training_precision,
 )
 
 INPUTS = ("raw", "log_z", "per_sample", "per_sample_rms", "per_sample_peak")
@@ -117,8 +117,8 @@ def main() -> None:
     args = p.parse_args()
     if args.keep_noise and max(args.test_gains) > 1:
         p.error("--keep-noise adds noise back to a dimmed size; it cannot take it out of a brightened one (a gain above 1)")
-    precision = training_precision(args.precision, "cpu", cpu_has_native_bf16())
     x, samples, _ = read_dataset(args.dataset.with_suffix(".zarr"), args.dataset.with_suffix(".parquet"))
+    precision = localiser_precision(args.precision, cpu_has_native_bf16(), tuple(x.shape[1:]))
     y = samples[["x", "y"]].to_numpy(np.float32)
     totals = samples.assign(total=x.reshape(len(x), -1).sum(axis=1)).groupby("size")["total"].mean()
     print(f"mean summed counts of a sample: {totals.round(0).to_dict()}")

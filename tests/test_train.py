@@ -13,7 +13,7 @@ from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train.cells import Cell
 from denali_pipe.train.classical import run_linear
 from denali_pipe.train.models import PAPER_MODELS, cnn1d
-from denali_pipe.train.training import Hyper, fit, infer, loss_for, partition, run_cell, targets, to_metres, training_device, training_precision
+from denali_pipe.train.training import Hyper, fit, infer, loss_for, partition, run_cell, targets, to_metres, training_device
 
 CLASSES = ("A", "B", "circle")
 N_LOC, REPEATS, BINS = 8, 3, 24
@@ -164,27 +164,28 @@ def test_training_device_is_the_gpu_whenever_torch_sees_one():
     assert training_device(cuda_available=False) == "cpu"
 
 
-def test_training_precision_is_bfloat16_only_where_auto_finds_native_bfloat16_or_it_is_asked_for():
-    # `denali train` passes torch's AMX and AVX-512 BF16 probes: a flag, so every branch runs on any CPU
-    assert training_precision("auto", "cpu", cpu_has_native_bf16=True) == torch.bfloat16
-    assert training_precision("auto", "cpu", cpu_has_native_bf16=False) == torch.float32
-    assert training_precision("auto", "cuda", cpu_has_native_bf16=True) == torch.float32
-    assert training_precision("bfloat16", "cpu", cpu_has_native_bf16=False) == torch.bfloat16
-    assert training_precision("float32", "cpu", cpu_has_native_bf16=True) == torch.float32
-    with pytest.raises(ValueError, match="unknown precision 'half'"):
-        training_precision("half", "cpu", cpu_has_native_bf16=True)
-
-
 def test_a_bfloat16_cell_learns_keeps_float32_weights_and_records_its_precision(data):
     # bfloat16 autocast runs on any CPU (emulated without AMX or AVX-512 BF16): the same cell as in float32 must still learn
     x, samples = data
-    res = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory(), precision=torch.bfloat16)
+    res = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory(), precision="bfloat16")
     m = res.metrics
-    assert m.precision == "bfloat16" and m.test["top1"] > 0.8 > m.baseline["top1"]
+    assert m.precision == "bfloat16" and m.precision_check is None and m.test["top1"] > 0.8 > m.baseline["top1"]
     assert all(v.dtype == torch.float32 for v in res.state["model"].values() if v.is_floating_point())
     f32 = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory())
     assert f32.metrics.precision == "float32"
     assert not all(torch.equal(res.state["model"][k], f32.state["model"][k]) for k in f32.state["model"])
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_an_auto_cell_records_the_check_that_chose_its_precision_where_one_ran(data, native):
+    # `denali train` passes torch's AMX and AVX-512 BF16 probes: a flag, so both branches run on any CPU
+    x, samples = data
+    m = run_cell(x, samples, _cell(task="size"), HP, validation_fraction=0.2, factory=factory(), precision="auto", native_bf16=native).metrics
+    if native:
+        assert m.precision_check["bfloat16"] is True and m.precision == "bfloat16"
+        assert m.precision_check["finite"] and m.precision_check["repeatable"] and m.precision_check["grad_error"] < 0.5
+    else:
+        assert m.precision == "float32" and m.precision_check is None
 
 
 def test_inference_in_bfloat16_returns_float32_close_to_float32_inference():

@@ -21,7 +21,8 @@ def cmd_fig9(args: argparse.Namespace) -> None:
     from denali_pipe.experiments.fig9 import run_fig9
     from denali_pipe.report.fig9 import write_fig9
     from denali_pipe.train.dataset import location_labels
-    from denali_pipe.train.training import Hyper, cpu_has_native_bf16, training_precision
+    from denali_pipe.train.precision import cpu_has_native_bf16
+    from denali_pipe.train.training import Hyper
     from denali_pipe.transforms.sim_to_real import read_fit_check, read_transforms
 
     torch.set_num_threads(args.threads)
@@ -44,7 +45,8 @@ def cmd_fig9(args: argparse.Namespace) -> None:
         args.config["fit"],
         Hyper(**args.hyper),
         args.config["seed"],
-        training_precision(args.precision, "cpu", cpu_has_native_bf16()),
+        args.precision,
+        cpu_has_native_bf16(),
     )
     out = Path(args.out)
     table = write_fig9(runs, out, out.with_suffix(".csv"))
@@ -64,7 +66,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--precision",
         choices=PRECISIONS,
         default="float32",
-        help="the localisers' training dtype (config train.precision; auto: bfloat16 on a CPU that multiplies it natively)",
+        help="the localisers' training dtype (config train.precision; auto: bfloat16 on a CPU that multiplies it natively, where its check passes)",
     )
     s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
     s.set_defaults(func=cmd_fig9)

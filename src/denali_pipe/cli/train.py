@@ -20,8 +20,9 @@ def cmd_train(args: argparse.Namespace) -> None:
     from denali_pipe.train.cells import LINEAR, Cell
     from denali_pipe.train.conditions import condition_view
     from denali_pipe.train.dataset import read_dataset
+    from denali_pipe.train.precision import cpu_has_native_bf16
     from denali_pipe.train.saved_cell import MODEL_FILE
-    from denali_pipe.train.training import Hyper, cpu_has_native_bf16, run_cell, training_device, training_precision
+    from denali_pipe.train.training import Hyper, run_cell, training_device
 
     torch.set_num_threads(args.threads)
     cell = Cell(**args.cell)
@@ -39,8 +40,8 @@ def cmd_train(args: argparse.Namespace) -> None:
         raise ValueError(f"train: model {cell.model!r} is a network and needs --factory 'package.module:factory'")
     else:
         device = training_device(torch.cuda.is_available())
-        precision = training_precision(args.precision, device, cpu_has_native_bf16())
-        result = run_cell(x, samples, cell, Hyper(**args.hyper), args.validation_fraction, args.factory, device, args.budget_seconds, precision)
+        hyper = Hyper(**args.hyper)
+        result = run_cell(x, samples, cell, hyper, args.validation_fraction, args.factory, device, args.budget_seconds, args.precision, cpu_has_native_bf16())
     with atomic_dir(Path(args.outdir)) as tmp:
         (tmp / METRICS_FILE).write_text(result.metrics.to_json())
         result.curves.to_csv(tmp / "curves.csv", index=False)
@@ -86,7 +87,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--precision",
         choices=PRECISIONS,
         default="float32",
-        help="the networks' training dtype (config train.precision; auto: bfloat16 on a CPU that multiplies it natively)",
+        help="the networks' training dtype (config train.precision; auto: bfloat16 on a CPU that multiplies it natively, where its check passes)",
     )
     s.add_argument("--budget-seconds", type=float, default=None, help="stop a network's training after this much training time")
     s.add_argument("--outdir", required=True, help="output run folder: metrics.json, curves.csv, model.pt")

@@ -39,6 +39,7 @@ per seed so that the baseline aggregates like every model.
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
 from dataclasses import dataclass, replace
@@ -53,6 +54,7 @@ from denali_pipe.core.seeds import derive_seed, rng_for
 from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train.metrics import predict_mean_baseline, regression_metrics
 from denali_pipe.train.models import cnn1d
+from denali_pipe.train.precision import check_bfloat16, training_precision
 from denali_pipe.train.registry import N_LOCATION_OUTPUTS
 from denali_pipe.train.training import Hyper, fit, infer, loss_for, position_head, standardise, target_statistics, to_metres
 from denali_pipe.transforms.sim_to_real import CENTRE_ZONE, FIDELITIES, GRID, ZONES, Pairs, ZoneTransforms, split_pairs
@@ -151,7 +153,7 @@ class Localiser:
 def train_localiser(x: np.ndarray, y: np.ndarray, hp: Hyper, seed: int, precision: torch.dtype) -> Localiser:
     """A fresh 1D CNN (location) trained on x (N, n, n, T), y (N, 2) m for
     hp.epochs through `train.fit` (the cells' loop and loss, no model
-    selection) in `precision` (`train.training_precision`). It regresses
+    selection) in `precision` (`localiser_precision`). It regresses
     standardised positions through the bounded head, as the clean protocol's
     location cells do: in metres its outputs would spend the few epochs
     learning the workspace's offset from 0 (the rows x 0.9-1.3 m)."""
@@ -182,10 +184,26 @@ def workspace(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return y.min(axis=0), y.max(axis=0)
 
 
-def score(x_fit: np.ndarray, y_fit: np.ndarray, x_test: np.ndarray, y_test: np.ndarray, hp: Hyper, seed: int, precision: torch.dtype) -> dict:
-    """Train a localiser on x_fit, y_fit and its test metrics (predictions bounded to y_fit's box)."""
+@functools.cache
+def localiser_precision(setting: str, native_bf16: bool, input_shape: tuple[int, ...]) -> torch.dtype:
+    """The dtype the localisers of `input_shape` (n, n, T) train in under
+    config `train.precision` (`precision.training_precision`, its check on a
+    fresh localiser of that shape, once a process)."""
+    with torch.random.fork_rng(devices=[]):
+        model = cnn1d("location", N_LOCATION_OUTPUTS, input_shape)
+    dtype, check = training_precision(
+        setting, "cpu", native_bf16, lambda: check_bfloat16(model, input_shape, "location", N_LOCATION_OUTPUTS, loss_for("location"))
+    )
+    log.info("fig9 localisers of input %s train in %s (check: %s)", input_shape, str(dtype).removeprefix("torch."), None if check is None else check.record())
+    return dtype
+
+
+def score(x_fit: np.ndarray, y_fit: np.ndarray, x_test: np.ndarray, y_test: np.ndarray, hp: Hyper, seed: int, precision: str, native_bf16: bool) -> dict:
+    """Train a localiser on x_fit, y_fit and its test metrics (predictions
+    bounded to y_fit's box); precision: config `train.precision`
+    (`localiser_precision`)."""
     t0 = time.perf_counter()
-    localiser = train_localiser(x_fit, y_fit, hp, seed, precision)
+    localiser = train_localiser(x_fit, y_fit, hp, seed, localiser_precision(precision, native_bf16, tuple(x_fit.shape[1:])))
     m = regression_metrics(bound_to_workspace(localiser.predict(x_test), *workspace(y_fit)), y_test)
     log.info("fig9 localiser on %d samples: test RMSE %.4f m (%.1f s)", len(x_fit), m["rmse"], time.perf_counter() - t0)
     return m
@@ -203,7 +221,14 @@ def control_hyper(hp: Hyper, n_sim: int, n_real: int) -> Hyper:
 
 
 def run_fig9(
-    pairs: Pairs, labels: np.ndarray, zt: ZoneTransforms, settings: dict, hp: Hyper, split_seed: int, precision: torch.dtype = torch.float32
+    pairs: Pairs,
+    labels: np.ndarray,
+    zt: ZoneTransforms,
+    settings: dict,
+    hp: Hyper,
+    split_seed: int,
+    precision: str = "float32",
+    native_bf16: bool = False,
 ) -> pd.DataFrame:
     """Every (panel, fidelity or control, n real, seed) model of Fig 9 and its test metrics.
 
@@ -213,7 +238,8 @@ def run_fig9(
     (test_fraction, fig9: real_samples, seeds, sim_copies); hp:
     Adam/batch/normalisation settings and epochs; split_seed: the seed of
     the real train/test split (the calibration's and the transforms');
-    precision: the models' training dtype (`train.training_precision`).
+    precision: config `train.precision`, native_bf16: whether this CPU
+    multiplies bfloat16 natively (`localiser_precision`).
 
     Returns one row per model, predictions bounded to its training labels'
     box, and one `MEAN_BASELINE` row per panel and seed: panel, fidelity,
@@ -246,13 +272,13 @@ def run_fig9(
             for n_real, asked in counts:
                 if n_real > 0:
                     x_real, y_real, _ = real_samples(r_train, y_train, n_real, seed)
-                    m = score(x_real, y_real, x_test, y_test, control_hyper(hp, n_sim, n_real), model_seed, precision)
+                    m = score(x_real, y_real, x_test, y_test, control_hyper(hp, n_sim, n_real), model_seed, precision, native_bf16)
                     rows.append({**common, "fidelity": CONTROL, "n_real": n_real, CAPPED: _asked(asked), "n_sim": 0, **m})
             for fidelity in FIDELITIES:
                 x_sim, y_sim = sim_samples(s_train, zones, y_train, zt, fidelity, f9["sim_copies"], seed, crop, kept)
                 for n_real, asked in counts:
                     x_real, y_real, _ = real_samples(r_train, y_train, n_real, seed)
-                    m = score(np.concatenate([x_sim, x_real]), np.concatenate([y_sim, y_real]), x_test, y_test, hp, model_seed, precision)
+                    m = score(np.concatenate([x_sim, x_real]), np.concatenate([y_sim, y_real]), x_test, y_test, hp, model_seed, precision, native_bf16)
                     rows.append({**common, "fidelity": fidelity, "n_real": n_real, CAPPED: _asked(asked), "n_sim": len(x_sim), **m})
             rows.append({**common, "fidelity": MEAN_BASELINE, "n_real": 0, CAPPED: "", "n_sim": 0, **baseline})
     return pd.DataFrame(rows)

@@ -53,7 +53,8 @@ class CellMetrics:
     threads: int | None = None
     selected_regularisation: float | None = None
     flops: int | None = None  # one sample's forward pass (models.forward_flops); None for the linear model
-    precision: str = "float32"  # the dtype training computed in (train.training_precision)
+    precision: str = "float32"  # the dtype training computed in (precision.training_precision)
+    precision_check: dict | None = None  # what decided it under `auto` (precision.PrecisionCheck.record); None where no check ran
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=1) + "\n"

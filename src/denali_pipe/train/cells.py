@@ -13,7 +13,7 @@ PROTOCOLS = ("clean", "paper")
 # Where a protocol's cells find their datasets, under results/: `clean` trains on the
 # preprocessed features' (dataset.py), `paper` on the stores' raw counts (paper_inputs.py).
 DATASET_DIRS = {"clean": "datasets", "paper": "datasets/paper"}
-# The dtypes a network can train in (config train.precision; train.training_precision).
+# The dtypes a network can train in (config train.precision; precision.training_precision).
 PRECISIONS = ("auto", "float32", "bfloat16")
 # The condition of a cell that trains and tests on every sample (conditions.py has the others).
 ALL = "all"

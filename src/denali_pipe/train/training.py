@@ -47,8 +47,10 @@ from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train import metrics as M
 from denali_pipe.train import paper_inputs
 from denali_pipe.train.cell_metrics import CellMetrics
-from denali_pipe.train.cells import PRECISIONS, PROTOCOLS, TASKS, Cell
+from denali_pipe.train.cells import PROTOCOLS, TASKS, Cell
+from denali_pipe.train.divergence import Losses, Snapshot, diverged, replay, state_finite
 from denali_pipe.train.models import forward_flops, n_params
+from denali_pipe.train.precision import check_bfloat16, training_precision
 from denali_pipe.train.registry import build
 from denali_pipe.train.saved_cell import SavedCell
 from denali_pipe.train.splits import Split, make_split, validation_split
@@ -187,32 +189,6 @@ def partition(samples: pd.DataFrame, y: np.ndarray, cell: Cell, validation_fract
     return Split(inner.train, split.test), inner.test
 
 
-def training_precision(setting: str, device: str, cpu_has_native_bf16: bool) -> torch.dtype:
-    """The dtype a network's training passes and its per-epoch validation
-    (model selection) compute in (`torch.autocast`; weights, gradients, the
-    optimiser and the test split's predictions stay float32).
-
-    setting: config `train.precision`. `auto` is bfloat16 on a CPU that
-    multiplies bfloat16 natively (`cpu_has_native_bf16`: the 1D CNN trains
-    2.0-2.7x faster on AMX, 2.0x on AVX-512 BF16, the 3D CNN 4x on AMX;
-    docs/performance.md), and float32 elsewhere: without those instructions
-    bfloat16 is emulated and gains little, and on CUDA (an H200, measured)
-    these launch-bound networks train no faster in it."""
-    if setting not in PRECISIONS:
-        raise ValueError(f"unknown precision {setting!r}; expected one of {PRECISIONS}")
-    if setting == "auto":
-        return torch.bfloat16 if device == "cpu" and cpu_has_native_bf16 else torch.float32
-    return getattr(torch, setting)
-
-
-def cpu_has_native_bf16() -> bool:
-    """Whether this CPU multiplies bfloat16 natively, which oneDNN's kernels
-    use under autocast: AMX tiles (Intel Sapphire Rapids and later) or
-    AVX-512 BF16's dot products (Intel Cooper Lake and later, AMD Zen 4 and
-    later). Private torch functions, so torch's pin (pyproject.toml) keeps them."""
-    return torch.cpu._is_amx_tile_supported() or torch.cpu._is_avx512_bf16_supported()
-
-
 def training_device(cuda_available: bool) -> str:
     """The torch device a network trains on: `cuda` (the first GPU, or the
     one SLURM's --gpus gives the job) whenever torch sees one, else `cpu`.
@@ -299,27 +275,33 @@ def fit(
     evaluated) once this much training time is spent, so that models too
     slow for the machine still give a measured point; None trains every epoch.
 
-    A NaN or infinite loss in an epoch raises ValueError naming `name` and the
-    epoch: the cell fails and nothing is selected or scored.
+    Non-finite inputs, or a NaN or infinite loss or weight at an epoch's end,
+    raise ValueError naming `name`, the epoch and the step, and the first
+    non-finite tensor (divergence.replay): the cell fails and nothing is
+    selected or scored.
 
     precision: the dtype of the forward and backward passes
-    (`training_precision`); the loss is taken in float32.
+    (`precision.training_precision`); the loss is taken in float32.
 
     head: applied to the model's outputs before the loss (`position_head`);
     evaluate_epoch still gets the model's own outputs.
 
     Progress goes to a tqdm bar when stderr is a terminal and to one log line
     per epoch otherwise. The model ends in the selected state."""
+    if not torch.isfinite(x).all():
+        raise ValueError(f"{name}: the inputs hold {int((~torch.isfinite(x)).sum())} non-finite values")
     # fused: one kernel per step for all parameters (the same update rule; a per-tensor loop cost 4 % of a 1D CNN step)
     opt = torch.optim.Adam(model.parameters(), lr=hp.lr, fused=True)
     gen = torch.Generator().manual_seed(seed)
     best_score, best_epoch, best_state = -np.inf, 0, None
     train_seconds, seen, over_budget = 0.0, 0, False
+    history = Losses()
     bar = tqdm(range(1, hp.epochs + 1), desc=name, unit="epoch", disable=not sys.stderr.isatty(), leave=False)
     for epoch in bar:
         model.train()
         t0 = time.perf_counter()
-        order, outs, total, n_batches = torch.randperm(len(x), generator=gen), [], torch.zeros(()), 0
+        snapshot = Snapshot.take(model, opt)
+        order, outs, losses, batches = torch.randperm(len(x), generator=gen), [], [], []
         for i in range(0, len(order), hp.batch_size):
             idx = order[i : i + hp.batch_size].to(x.device)
             opt.zero_grad(set_to_none=True)
@@ -329,25 +311,27 @@ def fit(
             batch_loss = loss(pred, y[idx])
             batch_loss.backward()
             opt.step()
-            total, n_batches = total + batch_loss.detach().cpu(), n_batches + 1
+            losses.append(batch_loss.detach())
+            batches.append(idx)
             if evaluate_epoch is not None:
                 outs.append((idx.cpu(), out.detach().float().cpu()))
             seen += len(idx)
             over_budget = budget_seconds is not None and train_seconds + time.perf_counter() - t0 > budget_seconds
             if over_budget:
                 break
-        # A NaN or inf loss has already poisoned the weights: no later epoch, and no metric, can be trusted.
-        if not torch.isfinite(total):
-            raise ValueError(
-                f"{name}: the loss diverged ({total.item()}) in epoch {epoch}; lower the learning rate (lr {hp.lr:g}) or check the inputs for non-finite values"
-            )
+        # A non-finite loss or weight has poisoned the model: no later epoch, and no metric, can be trusted.
+        epoch_losses = torch.stack(losses).cpu()
+        if not (torch.isfinite(epoch_losses).all() and state_finite(model, opt)):
+            raise ValueError(diverged(name, epoch, epoch_losses, history, hp.lr, precision,
+                                      replay(model, opt, snapshot, batches, x, y, loss, head, precision)))  # fmt: skip
+        history.add(epoch_losses)
         train_seconds += time.perf_counter() - t0
         score = None
         if evaluate_epoch is not None:
             score = evaluate_epoch(epoch, torch.cat([i for i, _ in outs]).numpy(), torch.cat([o for _, o in outs]).numpy())
         if evaluate_epoch is None or score > best_score:
             best_score, best_epoch, best_state = score, epoch, copy.deepcopy(model.state_dict())
-        progress = {"loss": f"{total.item() / n_batches:.4g}", **({} if score is None else {"score": f"{score:.4g}"})}
+        progress = {"loss": f"{epoch_losses.mean().item():.4g}", **({} if score is None else {"score": f"{score:.4g}"})}
         if bar.disable:
             log.info("%s: epoch %d/%d, mean batch loss %s%s, %.1f s training", name, epoch, hp.epochs, progress["loss"],
                      "" if score is None else f", score {progress['score']}", train_seconds)  # fmt: skip
@@ -369,14 +353,17 @@ def run_cell(
     factory: str,
     device: str = "cpu",
     budget_seconds: float | None = None,
-    precision: torch.dtype = torch.float32,
+    precision: str = "float32",
+    native_bf16: bool = False,
 ) -> Result:
     """Train one cell on (N, n, n, T) features `x` with sample table `samples`
     (`fit`, with the selection metric of `selection_key` on the validation
-    part or, under `paper`, the test split, scored in `precision`;
+    part or, under `paper`, the test split, scored in the training precision;
     `budget_seconds` as there; the test split is scored once, in float32). The
     network is model `cell.model` built by `factory` ('package.module:factory',
-    the registry's contract)."""
+    the registry's contract). precision: config `train.precision`, resolved
+    by `precision.training_precision` (native_bf16: whether this CPU
+    multiplies bfloat16 natively, `precision.cpu_has_native_bf16`)."""
     if cell.protocol not in PROTOCOLS:
         raise ValueError(f"unknown protocol {cell.protocol!r}; expected one of {PROTOCOLS}")
     torch.manual_seed(cell.seed)
@@ -399,6 +386,8 @@ def run_cell(
     input_shape = tuple(int(d) for d in x.shape[1:])
     model = build(cell.model, factory, cell.task, input_shape, n_classes).to(dev)
     flops = forward_flops(model, input_shape)
+    dtype, check = training_precision(precision, dev.type, native_bf16, lambda: check_bfloat16(model, input_shape, cell.task, n_classes, loss_for(cell.task)))
+    log.info("trains in %s%s", str(dtype).removeprefix("torch."), "" if check is None else f" (bfloat16's check: {check})")
     select_on = ("test", split.test) if val is None else ("validation", val)
     metric, sign = selection_key(cell.task)
     x_sel, y_sel = xn[select_on[1]], y[select_on[1]]
@@ -408,12 +397,12 @@ def run_cell(
         # training metrics from the epoch's own (train-mode) outputs: free, as the paper's curves
         rows.extend(metric_rows(epoch, "train", task_metrics(cell.task, to_metres(out, target_stats), y[split.train][seen])))
         # selection scores in the training precision (half the time of float32 where bfloat16 is native); the test split's in float32
-        sel = task_metrics(cell.task, to_metres(infer(model, x_sel, dev, precision), target_stats), y_sel)
+        sel = task_metrics(cell.task, to_metres(infer(model, x_sel, dev, dtype), target_stats), y_sel)
         rows.extend(metric_rows(epoch, select_on[0], sel))
         return sign * sel[metric]
 
     name = f"{cell.model} {cell.task} {cell.split} {cell.resolution} {cell.condition} {cell.protocol} seed {cell.seed}"
-    fitted = fit(model, xn[split.train].to(dev), yt[split.train].to(dev), hp, cell.seed, loss_for(cell.task), evaluate_epoch, budget_seconds, name, precision,
+    fitted = fit(model, xn[split.train].to(dev), yt[split.train].to(dev), hp, cell.seed, loss_for(cell.task), evaluate_epoch, budget_seconds, name, dtype,
                  position_head(target_stats))  # fmt: skip
 
     t0 = time.perf_counter()
@@ -447,7 +436,8 @@ def run_cell(
         train_samples_per_second=fitted.samples_seen / fitted.train_seconds if fitted.train_seconds > 0 else None,
         inference_samples_per_second=len(split.test) / infer_seconds if infer_seconds > 0 else None,
         device=str(dev),
-        precision=str(precision).removeprefix("torch."),
+        precision=str(dtype).removeprefix("torch."),
+        precision_check=None if check is None else check.record(),
         threads=torch.get_num_threads(),
     )
     state = SavedCell(
