@@ -13,7 +13,8 @@ import pandas as pd
 
 from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, background_of, expected_sets, parse_set_name, select_sets
 from denali_pipe.rig import feature_moments
-from denali_pipe.train.cells import DATASET_DIRS, LINEAR, SPLITS, TASKS, is_ill_posed, uses_gpu
+from denali_pipe.core.splits import SPLITS
+from denali_pipe.train.cells import DATASET_DIRS, LINEAR, TASKS, is_ill_posed, uses_gpu
 from denali_pipe.workflow.costs import combine, cost_model, frame_pixels, gpu_speedup, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
 from denali_pipe.train.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.train.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition

@@ -29,9 +29,9 @@ import pandas as pd
 import zarr
 
 from denali_pipe.core import geometry as geo
+from denali_pipe.core.splits import make_split
 from denali_pipe.train.conditions import condition_view
 from denali_pipe.train.evaluate import load_cell, predict
-from denali_pipe.train.splits import make_split
 
 BIN_WINDOW = 16  # bins per time-window ablation
 

@@ -8,8 +8,8 @@ import pytest
 from conftest import ASSETS
 
 from denali_pipe.core.objects import BASE_SHAPES
-from denali_pipe.train.cells import SPLITS, is_ill_posed
-from denali_pipe.train.splits import held_out_groups, make_split, validation_split
+from denali_pipe.core.splits import SPLITS, held_out_groups, make_split, validation_split
+from denali_pipe.train.cells import is_ill_posed
 
 
 def _samples(classes=BASE_SHAPES, n_loc=10, repeats=3):

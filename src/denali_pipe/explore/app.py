@@ -18,6 +18,7 @@ from dash import Dash, Input, Output, ctx, dcc, html
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.capture_sets import LIGHTINGS, CaptureSet, background_of, parse_set_name
 from denali_pipe.core.objects import BACKGROUNDS, SIZES
+from denali_pipe.core.splits import SPLITS
 from denali_pipe.explore import capture as cap
 from denali_pipe.explore import figures as figs
 from denali_pipe.explore.outputs import (
@@ -39,7 +40,7 @@ from denali_pipe.explore.outputs import (
     twin_path,
 )  # fmt: skip
 from denali_pipe.explore.predictions import ERROR_METRIC, capture_output, error_by_location, trained_cell
-from denali_pipe.train.cells import PROTOCOLS, SPLITS
+from denali_pipe.train.cells import PROTOCOLS
 
 log = logging.getLogger(__name__)
 

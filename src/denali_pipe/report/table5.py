@@ -6,8 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from denali_pipe.core.atomic import atomic_file
+from denali_pipe.core.splits import SPLITS
 from denali_pipe.report.paper import TABLE5
-from denali_pipe.train.cells import SPLITS
 from denali_pipe.train.runs import load_runs, metric_table, protocol_of
 
 

@@ -1,5 +1,6 @@
 """The vocabulary of training cells (model x task x split x resolution x
-protocol x seed), light enough for the Snakefile to import: no torch, no sklearn."""
+protocol x seed; the splits are core.splits'), light enough for the
+Snakefile to import: no torch, no sklearn."""
 
 from __future__ import annotations
 
@@ -8,7 +9,6 @@ from dataclasses import dataclass
 # The networks are the registry's (config `train.models`, registry.py); this one is not a network.
 LINEAR = "linear"  # the classical reference model (classical.py)
 TASKS = ("location", "shape", "size")
-SPLITS = ("random", "repeats_grouped", "location_held_out", "shape_held_out", "size_held_out")
 PROTOCOLS = ("clean", "paper")
 # Where a protocol's cells find their datasets, under results/: `clean` trains on the
 # preprocessed features' (dataset.py), `paper` on the stores' raw counts (paper_inputs.py).

@@ -10,7 +10,7 @@ protocol trains on the preprocessed features instead (dataset.py).
 - Samples: every repeat of every location of every given set, in the order of
   the reference's query: capture-set name (ASCII, as its sorted folder
   names), then location (its sorted `NNN.npy` files), then repeat. The seeded
-  splits (splits.py) depend on this order. The sample table has dataset.py's
+  splits (core/splits.py) depend on this order. The sample table has dataset.py's
   columns, so splits, conditions and labels read it unchanged.
 - Transform (`transform`): `raw` float32 counts, or `log_z`: log1p(clip(x, 0))
   then one global z-score whose mean and std (+1e-6) are taken over every

@@ -43,6 +43,7 @@ from torch import nn
 from tqdm import tqdm
 
 from denali_pipe.core.geometry import WORKSPACE_MARGIN
+from denali_pipe.core.splits import Split, make_split, validation_split
 from denali_pipe.preprocess.histograms import normalise
 from denali_pipe.train import metrics as M
 from denali_pipe.train import paper_inputs
@@ -53,7 +54,6 @@ from denali_pipe.train.models import forward_flops, n_params
 from denali_pipe.train.precision import check_bfloat16, training_precision
 from denali_pipe.train.registry import build
 from denali_pipe.train.saved_cell import SavedCell
-from denali_pipe.train.splits import Split, make_split, validation_split
 
 log = logging.getLogger(__name__)
 

@@ -56,8 +56,8 @@ from scipy.optimize import minimize_scalar, nnls
 from denali_pipe.core import geometry as geo
 from denali_pipe.core.atomic import atomic_file
 from denali_pipe.core.floor import common_offset, kept_bins, offset_spread
+from denali_pipe.core.splits import Split, held_out_groups
 from denali_pipe.io.features import read_features
-from denali_pipe.train.splits import Split, held_out_groups
 from denali_pipe.twin.render import read_twin
 
 log = logging.getLogger(__name__)

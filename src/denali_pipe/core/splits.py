@@ -1,4 +1,6 @@
-"""Train/test splits of the benchmark's samples, seeded and deterministic.
+"""Train/test splits of the benchmark's samples, seeded and deterministic:
+the benchmark's vocabulary, which training and the sim-to-real transforms
+both hold out by.
 
 A sample is one repeat of one capture (as in the paper). `samples` is a table
 with one row per sample and at least the columns `set`, `class`, `size`,
@@ -27,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from denali_pipe.train.cells import SPLITS
+SPLITS = ("random", "repeats_grouped", "location_held_out", "shape_held_out", "size_held_out")
+
 
 TEST_FRACTION = 0.3
 TRAIN_SIZE, TEST_SIZE = "4inch", "8inch"
