@@ -17,6 +17,7 @@ report: "report/workflow.rst"
 
 
 include: "rules/common.smk"
+include: "rules/sensor.smk"
 include: "rules/rig.smk"
 include: "rules/ingest.smk"
 include: "rules/poses.smk"

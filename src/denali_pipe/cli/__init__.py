@@ -26,6 +26,7 @@ from denali_pipe.cli import (
     release,
     report,
     rig,
+    sensor,
     stability,
     targets,
     train,
@@ -37,7 +38,7 @@ log = logging.getLogger("denali")
 
 # Verbs for people, then the stage verbs in the order the DAG runs them.
 USER_MODULES = (targets, release, predict, export, explore)
-STAGE_MODULES = (rig, ingest, poses, preprocess, train, report, twin, fit, fig9, generalisation, tsne, jitter, stability)
+STAGE_MODULES = (sensor, rig, ingest, poses, preprocess, train, report, twin, fit, fig9, generalisation, tsne, jitter, stability)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,49 @@
+"""`denali` verb of the sensor's fit to real captures (rules/sensor.smk)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+log = logging.getLogger("denali")
+
+
+def cmd_sensor_fit(args: argparse.Namespace) -> None:
+    import numpy as np
+
+    from denali_pipe.core.atomic import atomic_file
+    from denali_pipe.core.geometry import SPEED_OF_LIGHT
+    from denali_pipe.report.sensor_fit import write_absent, write_sensor_fit
+    from denali_pipe.sensor.captures import SWEEP, read_captures
+    from denali_pipe.sensor.fit import fit_sweep, held_out, held_out_scores, predict, record
+
+    source, out = Path(args.real_dir), Path(args.out)
+    if not (source / SWEEP).is_file():
+        log.warning("%s: no %s; the sensor is not fitted", source, SWEEP)
+        body = {"source": str(source), "status": f"no real captures: {source / SWEEP} not found"}
+        write_absent(source, out.with_suffix(".png"))
+    else:
+        sweep = read_captures(source / SWEEP)
+        fit = fit_sweep(sweep, args.held_out_every, args.min_distance_m, args.rounds)
+        held = held_out_scores(fit, sweep, args.held_out_every, args.min_distance_m)
+        use = np.flatnonzero(sweep.distance_m >= args.min_distance_m)
+        test = use[held_out(sweep.distance_m[use], args.held_out_every)]
+        examples = sweep.select(test[[0, -1]])
+        write_sensor_fit(fit, held, examples, predict(fit, examples)[0], out.with_suffix(".png"))
+        body = record(fit, held, str(source), SPEED_OF_LIGHT)
+        log.info("held-out scores per zone:\n%s", held.to_string(index=False))
+    with atomic_file(out) as tmp:
+        tmp.write_text(json.dumps(body, indent=1) + "\n")
+    log.info("wrote %s (%s)", out, body["status"])
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    s = sub.add_parser("sensor-fit", help="the TMF882x's pulse, timing, pile-up and crosstalk fitted to a real distance sweep")
+    s.add_argument("real_dir", help="folder of real captures (config sensor.real_dir); absent, the output says so")
+    s.add_argument("--held-out-every", type=int, required=True, help="every n-th distance is held out for the test")
+    s.add_argument("--min-distance-m", type=float, required=True, help="captures nearer than this are left out")
+    s.add_argument("--rounds", type=int, required=True, help="the fit's alternations")
+    s.add_argument("--out", required=True, help="results/sensor_fit.json; the figure and its CSV go beside it")
+    s.set_defaults(func=cmd_sensor_fit)
