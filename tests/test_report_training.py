@@ -5,6 +5,7 @@ import json
 import pandas as pd
 import pytest
 
+from denali_pipe.core.splits import SPLITS
 from denali_pipe.experiments.jitter import jitter_curve
 from denali_pipe.report.condition_table import condition_table, write_condition_table
 from denali_pipe.report.jitter import plot_jitter
@@ -15,7 +16,7 @@ from denali_pipe.report.table5 import write_table5
 from denali_pipe.report.table10 import write_table10
 from denali_pipe.report.training_curves import write_training_curves
 from denali_pipe.train.cell_metrics import CellMetrics
-from denali_pipe.train.cells import SPLITS, TASKS, Cell, is_ill_posed
+from denali_pipe.train.cells import TASKS, Cell, is_ill_posed
 from denali_pipe.train.conditions import CONDITION_GROUPS, TABLES
 from denali_pipe.train.jitter import jitter_condition
 from denali_pipe.train.models import PAPER_MODELS

@@ -18,10 +18,11 @@ from workflow import TABLE5, copy_workflow, merged_config, reduced_configfiles, 
 from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
 from denali_pipe.core.geometry import OBJECT_TAG_ID, select_locations
 from denali_pipe.core.objects import BACKGROUNDS, load_catalogue
+from denali_pipe.core.splits import SPLITS
 from denali_pipe.io.pickle_stream import CAMERA_RECORDS, iter_records
 from denali_pipe.io.store import open_set
 from denali_pipe.rig.capture import synth_sets
-from denali_pipe.train.cells import SPLITS, TASKS, is_ill_posed
+from denali_pipe.train.cells import TASKS, is_ill_posed
 from denali_pipe.train.runs import METRICS, NA
 
 pytestmark = pytest.mark.e2e
