@@ -224,5 +224,5 @@ def alive(pid: int) -> bool:
         return False
     try:  # a zombie waiting for its watcher counts as gone
         return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
-    except FileNotFoundError:
+    except (FileNotFoundError, ProcessLookupError):  # reaped between the two looks: /proc answers ESRCH mid-read
         return False
