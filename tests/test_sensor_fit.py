@@ -11,11 +11,10 @@ from conftest import REPO
 from scipy.stats import exponnorm
 
 from denali_pipe.sensor.captures import BINS, SWEEP, ZONES, Captures, read_captures
-from denali_pipe.sensor.fit import CENTRE, Timing, fit_sweep, held_out, held_out_scores, predict, scores
+from denali_pipe.sensor.fit import CENTRE, CRITERIA, Timing, fit_sweep, held_out, held_out_scores, predict, scores, split_sweep
 from denali_pipe.sensor.response import counts_from_rates, pulse_area, pulse_at, pulse_centre, pulse_offsets, tail_summary
 
 REAL = REPO.parent / "shared" / "real-tmf8820"
-CRITERIA = {"nl2_net": 0.05, "tail_error": 0.10, "late_error": 0.05}
 
 
 def simulated_sweep(seed=0, n=48) -> tuple[Captures, dict]:
@@ -59,7 +58,7 @@ def test_the_fit_recovers_a_known_sensor():
     fitted, true = tail_summary(fit.pulse), tail_summary(truth["pulse"])
     assert fitted["share_from_5_bins"] == pytest.approx(true["share_from_5_bins"], rel=0.1)
     assert fitted["time_constant_bins"] == pytest.approx(true["time_constant_bins"], rel=0.1)
-    held = held_out_scores(fit, sweep, 4, 0.05)
+    held = held_out_scores(fit, split_sweep(sweep, 4, 0.05)[1])
     assert (held["nl2_net"] < 0.015).all() and (held["late_error"].abs() < 0.02).all()
 
 
@@ -86,8 +85,7 @@ needs_real = pytest.mark.skipif(not (REAL / SWEEP).is_file(), reason="needs ../s
 def real():
     sweep = read_captures(REAL / SWEEP)
     fit = fit_sweep(sweep, held_out_every=4, min_distance_m=0.05, rounds=4)
-    use = np.flatnonzero(sweep.distance_m >= 0.05)
-    return fit, sweep.select(use[held_out(sweep.distance_m[use], 4)])
+    return fit, split_sweep(sweep, 4, 0.05)[1]
 
 
 def within(fit, test) -> dict:

@@ -11,13 +11,10 @@ log = logging.getLogger("denali")
 
 
 def cmd_sensor_fit(args: argparse.Namespace) -> None:
-    import numpy as np
-
     from denali_pipe.core.atomic import atomic_file
-    from denali_pipe.core.geometry import SPEED_OF_LIGHT
     from denali_pipe.report.sensor_fit import write_absent, write_sensor_fit
     from denali_pipe.sensor.captures import SWEEP, read_captures
-    from denali_pipe.sensor.fit import fit_sweep, held_out, held_out_scores, predict, record
+    from denali_pipe.sensor.fit import fit_sweep, held_out_scores, predict, record, split_sweep
 
     source, out = Path(args.real_dir), Path(args.out)
     if not (source / SWEEP).is_file():
@@ -27,12 +24,11 @@ def cmd_sensor_fit(args: argparse.Namespace) -> None:
     else:
         sweep = read_captures(source / SWEEP)
         fit = fit_sweep(sweep, args.held_out_every, args.min_distance_m, args.rounds)
-        held = held_out_scores(fit, sweep, args.held_out_every, args.min_distance_m)
-        use = np.flatnonzero(sweep.distance_m >= args.min_distance_m)
-        test = use[held_out(sweep.distance_m[use], args.held_out_every)]
-        examples = sweep.select(test[[0, -1]])
+        _, test = split_sweep(sweep, args.held_out_every, args.min_distance_m)
+        held = held_out_scores(fit, test)
+        examples = test.select([0, -1])  # the nearest and the farthest held-out plane
         write_sensor_fit(fit, held, examples, predict(fit, examples)[0], out.with_suffix(".png"))
-        body = record(fit, held, str(source), SPEED_OF_LIGHT)
+        body = record(fit, held, str(source))
         log.info("held-out scores per zone:\n%s", held.to_string(index=False))
     with atomic_file(out) as tmp:
         tmp.write_text(json.dumps(body, indent=1) + "\n")

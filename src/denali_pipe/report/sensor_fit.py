@@ -17,11 +17,8 @@ import pandas as pd
 
 from denali_pipe.core.figure import plt, save_figure
 from denali_pipe.sensor.captures import ZONES, Captures
-from denali_pipe.sensor.fit import CENTRE, LATE, TAIL, SensorFit
+from denali_pipe.sensor.fit import CENTRE, CRITERIA, LATE, TAIL, SensorFit, bin_width_ps
 from denali_pipe.sensor.response import pulse_offsets, tail_summary
-
-# What a fitted sensor must reach on held-out distances (issue 63): nl2 net of shot noise, |tail|, |late floor|.
-CRITERIA = {"nl2_net": 0.05, "tail_error": 0.10, "late_error": 0.05}
 
 
 def write_sensor_fit(fit: SensorFit, held: pd.DataFrame, examples: Captures, expected: np.ndarray, png: Path) -> None:
@@ -54,7 +51,7 @@ def write_sensor_fit(fit: SensorFit, held: pd.DataFrame, examples: Captures, exp
     a.legend(fontsize=8)
     a = ax[1, 1]
     a.errorbar(x, fit.timing.bins_per_metre, yerr=fit.se["bins_per_metre"], fmt="o", color="k")
-    ps = 2 / (2.99792458e8 * fit.timing.bins_per_metre[CENTRE]) * 1e12
+    ps = bin_width_ps(fit.timing.bins_per_metre[CENTRE])
     a.axhline(fit.timing.bins_per_metre[CENTRE], color="0.6", lw=1, label=f"centre zone: {ps:.1f} ps a bin")
     a.set(xlabel="zone", ylabel="bins per metre of plane distance", xticks=x, title=f"timing (zero distance at bin {fit.timing.zero_bin:.2f})")
     a.legend(fontsize=8)

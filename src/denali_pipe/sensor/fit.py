@@ -46,6 +46,7 @@ import pandas as pd
 import scipy.sparse as sp
 from scipy.optimize import least_squares, nnls
 
+from denali_pipe.core.geometry import SPEED_OF_LIGHT
 from denali_pipe.sensor.captures import BINS, ZONES, Captures
 from denali_pipe.sensor.response import centred, counts_from_rates, pulse_area, pulse_at, pulse_design, pulse_offsets, rates_from_counts, tail_summary
 
@@ -55,8 +56,10 @@ BIN = np.arange(BINS)
 # quarter-bin samples between the captures' sub-bin positions without flattening the peak.
 SMOOTHING = 100.0
 SHIFT_GRID = np.linspace(-1.0, 1.0, 41)  # bins: each capture's shift search, then a parabola through the best three
-# Windows after a zone's peak (bins) that the held-out score reports apart (issue 63's criteria).
+# Windows after a zone's peak (bins) that the held-out score reports apart, and what a fitted
+# sensor must reach on held-out distances (issue 63): nl2 net of shot noise, |tail|, |late floor| errors.
 TAIL, LATE = (5, 20), (30, 60)
+CRITERIA = {"nl2_net": 0.05, "tail_error": 0.10, "late_error": 0.05}
 
 
 @dataclass(frozen=True)
@@ -112,6 +115,15 @@ def held_out(distance_m: np.ndarray, every: int) -> np.ndarray:
     mask = np.zeros(len(distance_m), bool)
     mask[order[2::every]] = True
     return mask
+
+
+def split_sweep(sweep: Captures, held_out_every: int, min_distance_m: float) -> tuple[Captures, Captures]:
+    """(training, held-out) captures of a sweep from min_distance_m on (`held_out`)."""
+    if sweep.distance_m is None:
+        raise ValueError(f"{sweep.name}: not a distance sweep (no dist_to_plane_m)")
+    use = np.flatnonzero(sweep.distance_m >= min_distance_m)
+    test = held_out(sweep.distance_m[use], held_out_every)
+    return sweep.select(use[~test]), sweep.select(use[test])
 
 
 def _inner(pulse, mu, rates, sd, crosstalk_mu, crosstalk=None):
@@ -192,11 +204,7 @@ def _initial(hists: np.ndarray, distance: np.ndarray) -> tuple[Timing, float, np
 def fit_sweep(sweep: Captures, held_out_every: int = 4, min_distance_m: float = 0.05, rounds: int = 6) -> SensorFit:
     """The sensor fitted to the sweep's captures from min_distance_m on, less
     the held-out ones (`held_out`); `rounds` alternations (module docstring)."""
-    if sweep.distance_m is None:
-        raise ValueError(f"{sweep.name}: not a distance sweep (no dist_to_plane_m)")
-    use = sweep.distance_m >= min_distance_m
-    test = held_out(sweep.distance_m[use], held_out_every)
-    train = sweep.select(np.flatnonzero(use)[~test])
+    train, test = split_sweep(sweep, held_out_every, min_distance_m)
     d, hists = train.distance_m, train.hists
     timing, cycles, pulse = _initial(hists, d)
     shift = np.zeros(len(d))
@@ -241,7 +249,7 @@ def fit_sweep(sweep: Captures, held_out_every: int = 4, min_distance_m: float = 
         chi2_dof=chi2_dof,
         shift_sd=float(shift.std()),
         train_distances=d,
-        test_distances=sweep.distance_m[use][test],
+        test_distances=test.distance_m,
         history=history,
     )
 
@@ -275,22 +283,25 @@ def scores(measured: np.ndarray, expected: np.ndarray) -> dict:
     return out
 
 
-def held_out_scores(fit: SensorFit, sweep: Captures, held_out_every: int, min_distance_m: float) -> pd.DataFrame:
-    """One row per zone: `scores` of the held-out captures (`held_out`) under
-    the fit, and the sd of their shifts from the timing law (bins)."""
-    use = np.flatnonzero(sweep.distance_m >= min_distance_m)
-    test = sweep.select(use[held_out(sweep.distance_m[use], held_out_every)])
+def held_out_scores(fit: SensorFit, test: Captures) -> pd.DataFrame:
+    """One row per zone: `scores` of the held-out captures (`split_sweep`)
+    under the fit, and the sd of their shifts from the timing law (bins)."""
     expected, shift, _ = predict(fit, test)
     s = scores(test.hists, expected)
     return pd.DataFrame({"zone": np.arange(ZONES), **s, "n_captures": len(test.hists), "shift_sd_bins": float(shift.std())})
 
 
-def record(fit: SensorFit, held: pd.DataFrame, source: str, speed_of_light: float) -> dict:
+def bin_width_ps(bins_per_metre: np.ndarray) -> np.ndarray:
+    """A bin in ps from bins per metre of plane distance (the light goes there and back): 2 / (c slope)."""
+    return 2 / (SPEED_OF_LIGHT * np.asarray(bins_per_metre)) * 1e12
+
+
+def record(fit: SensorFit, held: pd.DataFrame, source: str) -> dict:
     """results/sensor_fit.json: every shared term with its standard error,
     the pulse's samples and tail, the bin width it implies (ps, from bins per
     metre of plane distance: 2 / (c slope)), and the held-out scores per zone."""
     slopes = fit.timing.bins_per_metre
-    ps = 2 / (speed_of_light * slopes) * 1e12
+    ps = bin_width_ps(slopes)
     return {
         "source": source,
         "status": "fitted",

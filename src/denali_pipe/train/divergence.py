@@ -22,15 +22,26 @@ from torch import nn
 @dataclass(frozen=True)
 class Snapshot:
     """An epoch's starting point: the model's and the optimiser's state and the
-    CPU random state (dropout's masks); the batches' order is the caller's."""
+    random state of the model's device (dropout's masks: the CPU's, and the
+    GPU's where the model is on one); the batches' order is the caller's."""
 
     model: dict
     optimiser: dict
     rng: torch.Tensor
+    cuda_rng: torch.Tensor | None
 
     @classmethod
     def take(cls, model: nn.Module, opt: torch.optim.Optimizer) -> Snapshot:
-        return cls(copy.deepcopy(model.state_dict()), copy.deepcopy(opt.state_dict()), torch.get_rng_state())
+        device = next(model.parameters()).device
+        cuda_rng = torch.cuda.get_rng_state(device) if device.type == "cuda" else None
+        return cls(copy.deepcopy(model.state_dict()), copy.deepcopy(opt.state_dict()), torch.get_rng_state(), cuda_rng)
+
+    def restore(self, model: nn.Module, opt: torch.optim.Optimizer) -> None:
+        model.load_state_dict(self.model)
+        opt.load_state_dict(self.optimiser)
+        torch.set_rng_state(self.rng)
+        if self.cuda_rng is not None:
+            torch.cuda.set_rng_state(self.cuda_rng, next(model.parameters()).device)
 
 
 def all_finite(tensors) -> bool:
@@ -57,9 +68,7 @@ def replay(
     `snapshot` and ran `batches` (row indices of x and y), steps counted from
     1; None if the replay stays finite. The model and optimiser end in the
     replay's state."""
-    model.load_state_dict(snapshot.model)
-    opt.load_state_dict(snapshot.optimiser)
-    torch.set_rng_state(snapshot.rng)
+    snapshot.restore(model, opt)
     if not all_finite(model.parameters()):
         return 0, "a weight at the epoch's start"
     first: list[str] = []

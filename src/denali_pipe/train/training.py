@@ -299,8 +299,8 @@ def fit(
     bar = tqdm(range(1, hp.epochs + 1), desc=name, unit="epoch", disable=not sys.stderr.isatty(), leave=False)
     for epoch in bar:
         model.train()
-        t0 = time.perf_counter()
         snapshot = Snapshot.take(model, opt)
+        t0 = time.perf_counter()
         order, outs, losses, batches = torch.randperm(len(x), generator=gen), [], [], []
         for i in range(0, len(order), hp.batch_size):
             idx = order[i : i + hp.batch_size].to(x.device)
