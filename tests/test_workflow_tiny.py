@@ -183,6 +183,10 @@ def test_the_sensor_fit_says_where_no_real_captures_were_found(tiny_run):
     body = json.loads((tiny_run / "results/sensor_fit.json").read_text())
     assert body["status"].startswith("no real captures") and "real-tmf8820" in body["source"]
     assert (tiny_run / "results/sensor_fit.png").stat().st_size > 1_000
+    # and the test on real scenes, which needs the fit, says so in its table and figure
+    scenes = pd.read_csv(tiny_run / "results/sensor_vs_real.csv")
+    assert list(scenes.columns) == ["status"] and scenes.status.iloc[0].startswith("no fitted sensor")
+    assert (tiny_run / "results/sensor_vs_real.png").stat().st_size > 1_000
 
 
 def test_bad_set_fails_alone_with_keep_going(tiny_run, tmp_path):
@@ -530,7 +534,7 @@ def test_tsne_figures_at_both_resolutions(tiny_run):
 
 
 REPORTED = (
-    "sensor_fit.png", "rig_examples.png", "rig_vs_real.png", "table4.csv", "table6.csv", "fig12.png", "detections.csv", "table5.csv", "table2.csv", "table10.csv",
+    "sensor_fit.png", "sensor_vs_real.png", "rig_examples.png", "rig_vs_real.png", "table4.csv", "table6.csv", "fig12.png", "detections.csv", "table5.csv", "table2.csv", "table10.csv",
     "fig16.png", "fig17.png", "speed_vs_accuracy.png", "render_benchmark.png", "twin_calibration.png", "fig18.png", "transforms.json", "fig9.png",
     "fig10.png", "fig11.png", "fig13.png", "fig14.png", "table7.csv", "table8.csv", "table9.csv", "jitter.png", "stability.png",
 )  # fmt: skip

@@ -35,6 +35,45 @@ def cmd_sensor_fit(args: argparse.Namespace) -> None:
     log.info("wrote %s (%s)", out, body["status"])
 
 
+def cmd_sensor_vs_real(args: argparse.Namespace) -> None:
+    import pandas as pd
+
+    from denali_pipe.experiments.sensor_vs_real import compare_scene, read_mesh
+    from denali_pipe.report.sensor_vs_real import write_absent, write_sensor_vs_real
+    from denali_pipe.sensor.captures import SWEEP, read_captures
+    from denali_pipe.sensor.fit import from_record
+
+    source, out = Path(args.real_dir), Path(args.out)
+    body = json.loads(Path(args.fit).read_text())
+    scenes = sorted(p for p in source.glob("*.npz") if p.name != SWEEP) if source.is_dir() else []
+    rows, rendered = [], []
+    if body.get("status") != "fitted":
+        reason = f"no fitted sensor ({args.fit}: {body.get('status')})"
+    elif not scenes:
+        reason = f"no scenes: no .npz beside {SWEEP} in {source}"
+    else:
+        fit = from_record(body)
+        for npz in scenes:
+            stl = npz.with_suffix(".stl")
+            if not stl.is_file():
+                rows.append(pd.DataFrame({"scene": [npz.stem], "status": [f"not rendered: no mesh {stl.name}"]}))
+                continue
+            captures = read_captures(npz)
+            table, expected = compare_scene(fit, captures, read_mesh(stl))
+            rows.append(table.assign(status="rendered"))
+            rendered.append((captures, expected))
+            log.info("%s:\n%s", npz.stem, table.to_string(index=False))
+        reason = f"no scene in {source} has its mesh (<scene>.stl)"
+    table = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame({"scene": [], "status": []})
+    table = table[[c for c in table.columns if c != "status"] + ["status"]]
+    if rendered:
+        write_sensor_vs_real(rendered, table, out.with_suffix(".png"))
+    else:
+        log.warning("%s; no scene rendered", reason)
+        write_absent(reason, table if rows else pd.DataFrame({"status": [reason]}), out.with_suffix(".png"))
+    log.info("wrote %s", out)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("sensor-fit", help="the TMF882x's pulse, timing, pile-up and crosstalk fitted to a real distance sweep")
     s.add_argument("real_dir", help="folder of real captures (config sensor.real_dir); absent, the output says so")
@@ -43,3 +82,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--rounds", type=int, required=True, help="the fit's alternations")
     s.add_argument("--out", required=True, help="results/sensor_fit.json; the figure and its CSV go beside it")
     s.set_defaults(func=cmd_sensor_fit)
+    s = sub.add_parser("sensor-vs-real", help="the fitted sensor on real scenes it was not fitted to: each capture rendered from its mesh and pose")
+    s.add_argument("real_dir", help="folder of real captures (config sensor.real_dir): every <scene>.npz with its <scene>.stl")
+    s.add_argument("--fit", required=True, help="results/sensor_fit.json")
+    s.add_argument("--out", required=True, help="results/sensor_vs_real.csv; the figure goes beside it")
+    s.set_defaults(func=cmd_sensor_vs_real)

@@ -94,7 +94,10 @@ class SensorFit:
     cycle of the zero-distance return (median over the training captures);
     se: standard errors by name (zero_bin, offsets, bins_per_metre, cycles);
     chi2_dof: the last step's weighted residual per degree of freedom;
-    shift_sd: the training captures' shifts' sd (bins)."""
+    shift_sd: the training captures' shifts' sd (bins); amplitude
+    (len(train_distances), ZONES): each training capture's return, detections
+    per cycle (the pulse's area), from which a scene's render reads each
+    zone's gain (experiments.sensor_vs_real)."""
 
     timing: Timing
     cycles: float
@@ -105,6 +108,7 @@ class SensorFit:
     shift_sd: float
     train_distances: np.ndarray
     test_distances: np.ndarray
+    amplitude: np.ndarray
     history: list = field(default_factory=list)
 
 
@@ -166,11 +170,18 @@ def _shifts(pulse, timing, distance, rates, sd, crosstalk=None):
     """Each capture's time shift (N,) bins minimising its weighted residual over all zones."""
     zero = timing.position(np.zeros(len(distance)))
     costs = np.stack([(_inner(pulse, timing.position(distance, s), rates, sd, zero, crosstalk)[0] ** 2).sum(axis=(1, 2)) for s in SHIFT_GRID], axis=1)
-    best = np.clip(costs.argmin(axis=1), 1, len(SHIFT_GRID) - 2)
+    return grid_minimum(SHIFT_GRID, costs)
+
+
+def grid_minimum(grid: np.ndarray, costs: np.ndarray) -> np.ndarray:
+    """(N,) where each row of costs (N, len(grid)), sampled on the even
+    grid, is least: the best grid point moved to the vertex of the parabola
+    through it and its two neighbours."""
+    best = np.clip(costs.argmin(axis=1), 1, len(grid) - 2)
     c0, c1, c2 = (costs[np.arange(len(best)), best + j] for j in (-1, 0, 1))
-    step = SHIFT_GRID[1] - SHIFT_GRID[0]
+    step = grid[1] - grid[0]
     denom = c0 - 2 * c1 + c2
-    return SHIFT_GRID[best] + np.where(denom > 0, 0.5 * step * (c0 - c2) / np.where(denom > 0, denom, 1), 0.0)
+    return grid[best] + np.where(denom > 0, 0.5 * step * (c0 - c2) / np.where(denom > 0, denom, 1), 0.0)
 
 
 def _detrended(shift, distance):
@@ -250,6 +261,7 @@ def fit_sweep(sweep: Captures, held_out_every: int = 4, min_distance_m: float = 
         shift_sd=float(shift.std()),
         train_distances=d,
         test_distances=test.distance_m,
+        amplitude=coef[..., 0],
         history=history,
     )
 
@@ -324,6 +336,28 @@ def record(fit: SensorFit, held: pd.DataFrame, source: str) -> dict:
         "shift_sd_bins": fit.shift_sd,
         "train_distances_m": fit.train_distances.tolist(),
         "test_distances_m": fit.test_distances.tolist(),
+        "amplitude_per_cycle": fit.amplitude.tolist(),
         "history": fit.history,
         "held_out": held.to_dict(orient="records"),
     }
+
+
+def from_record(body: dict) -> SensorFit:
+    """The fit back from its `record` (results/sensor_fit.json); ValueError
+    when the record holds no fit (its status says why)."""
+    if body.get("status") != "fitted":
+        raise ValueError(f"the sensor was not fitted: {body.get('status')}")
+    t = body["timing"]
+    return SensorFit(
+        timing=Timing(float(t["zero_bin"]), np.asarray(t["offsets_bins"], float), np.asarray(t["bins_per_metre"], float)),
+        cycles=float(body["cycles"]),
+        pulse=np.asarray(body["pulse"]["samples"], float),
+        crosstalk=np.asarray(body["crosstalk_per_cycle"], float),
+        se=body["se"],
+        chi2_dof=float(body["chi2_dof"]),
+        shift_sd=float(body["shift_sd_bins"]),
+        train_distances=np.asarray(body["train_distances_m"], float),
+        test_distances=np.asarray(body["test_distances_m"], float),
+        amplitude=np.asarray(body["amplitude_per_cycle"], float),
+        history=body["history"],
+    )

@@ -39,6 +39,7 @@ TARGETS = (
     Target("sim-to-real transforms", "fitted scale, blur and noise", "results/transforms.json"),
     Target("stability", "every failure mode of the run's cells, sim-to-real fit and twin calibration", "results/stability.csv"),
     Target("sensor fit", "the TMF882x's pulse, timing, pile-up and crosstalk fitted to real raw histograms", "results/sensor_fit.json"),
+    Target("sensor vs real", "the fitted sensor on real scenes it was not fitted to", "results/sensor_vs_real.csv"),
     Target("rig vs real", "the capture source's histograms beside real DENALI captures", "results/rig_vs_real.png"),
     Target("rig examples", "raw histograms beside their background", "results/rig_examples.png"),
     Target("tag detections", "detection and pose rates per lighting and tag", "results/calibration/detections.csv"),
