@@ -33,7 +33,7 @@ coordinate (`slope_x`, `slope_y`): a shift, and a pull toward the middle of
 the training positions when below 0.
 
 Cited by docs/rig_zones.md, "What the localisers read, and the held-out size";
-docs/stages.md, "Training cells" (the clean protocol's targets and head).
+docs/deviations.md, "Training protocol" (the clean protocol's targets and head).
 """
 
 from __future__ import annotations
