@@ -17,6 +17,8 @@ RMSE (m, per coordinate) against the intact input and the mean baseline:
 - `amplitude`: each zone's amplitude (L2 norm over time), keeping its shape (timing);
 - `timing`: each zone's shape, keeping its amplitude.
 A rise says the model reads that part; none says it does not.
+
+Cited by docs/rig_zones.md, "What the localisers read, and the held-out size".
 """
 
 from __future__ import annotations

@@ -31,6 +31,9 @@ of test predictions outside the gantry's workspace and the furthest one (m), and
 the test errors' mean (`bias_x`, `bias_y`, m) and slope against the true
 coordinate (`slope_x`, `slope_y`): a shift, and a pull toward the middle of
 the training positions when below 0.
+
+Cited by docs/rig_zones.md, "What the localisers read, and the held-out size";
+docs/deviations.md, "Training protocol" (the clean protocol's targets and head).
 """
 
 from __future__ import annotations

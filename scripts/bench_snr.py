@@ -12,6 +12,8 @@ the capture's Poisson and read noise (`rig.measure.matched_filter_snr`).
 Printed per zone: the median over scenes, and each zone's photon budget
 (mean counts per bin of the capture, lights off); and the whole capture's
 SNR (every zone's matched filter together, root sum of squares).
+
+Cited by docs/rig_zones.md, "The 8x8 mode".
 """
 
 from __future__ import annotations

@@ -13,6 +13,8 @@ and Part 4's centre-zone checks on the 8 in square at location 45, lights
 off: (b) floor / direct peak and late / pre-peak floor on the background,
 (c) the bump's excess over the peak and over the floor and its per-bin SNR in
 one noisy capture, and the bump's FWHM (expected counts).
+
+Cited by docs/rig_zones.md, "Every zone's photometry".
 """
 
 from __future__ import annotations

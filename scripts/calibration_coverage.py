@@ -21,6 +21,8 @@ per group (zone footprints; globals: time offset, pulse, share, widths,
 glare), and
 how many were flagged. The calibration's settings are the tests' (film 2,
 10 samples across the object): ~10 CPU-s a planting.
+
+Cited by docs/twin.md, "Calibration" (recovery and coverage).
 """
 
 from __future__ import annotations

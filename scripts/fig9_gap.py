@@ -23,6 +23,8 @@ transforms' seed) and per panel (`experiments.fig9.PANELS`), the test RMSE
 
 The twins are `results/twin_calibrated`'s of the base objects, the real
 captures the 3x3 light-on feature stores that have one (the fit's sets).
+
+Cited by docs/twin.md, "Transforms and Fig 9".
 """
 
 from __future__ import annotations

@@ -48,6 +48,9 @@ pitch, the vignetting power) and adds every net's and layer's distance to
 the objective, layers 2 and 3 included, so the fit reports how close the
 rig's physical terms can come to the real moments at all, and which fitted
 yardstick and check they give up to get there.
+
+Cited by docs/rig_zones.md, "Every zone's photometry" (the fit) and
+"The feature statistics" (`--family-floor`).
 """
 
 from __future__ import annotations

@@ -19,6 +19,8 @@ bin where the direct return first reaches half its height above the floor
 (relative to the centre zone's here), its width above half, its tails, the
 late floor and the near-field return. `report.paper.REAL_FIGURE_ZONES`
 records the real readings.
+
+Cited by docs/rig_zones.md, "Every zone of the figure, read bar by bar".
 """
 
 from __future__ import annotations

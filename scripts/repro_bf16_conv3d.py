@@ -14,6 +14,9 @@ under `ONEDNN_MAX_CPU_ISA=AVX2` (no bfloat16 kernel) every tap agrees.
 
 Runs in about a second. Prints, per repeat, each depth tap's relative error
 ||g_bf16 - g_f32|| / ||g_f32|| (bfloat16's rounding gives ~0.003-0.02).
+
+Cited by docs/deviations.md, "Training protocol" (the 3D CNN's shape model at
+3x3 trains in float32).
 """
 
 from __future__ import annotations

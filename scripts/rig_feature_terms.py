@@ -29,6 +29,8 @@ its moments leave the real ones (`feature_moments.time_profile`: per layer
 and 16-bin block, the median over channels of E[(y - running_mean)^2] /
 running_var, the median over each kind of net; the real data average ~1).
 A few minutes on one core.
+
+Cited by docs/rig_zones.md, "The feature statistics".
 """
 
 from __future__ import annotations

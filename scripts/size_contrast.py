@@ -25,6 +25,8 @@ contrast, pooled as the release pools it (one set per object, size and
 lighting). With `--terms`, the contrast
 again with one response term changed at a time (the light transport kept):
 which of the rig's terms move it.
+
+Cited by docs/rig_zones.md, "What the localisers read, and the held-out size".
 """
 
 from __future__ import annotations
