@@ -125,6 +125,8 @@ BAD = [
     ({"bogus": 1}, "bogus"),
     ({"rig": {"n_location": 3}}, "n_location"),
     ({"rig": {"frames": {"scale": 0.5}}}, "scale"),
+    ({"sensor": {"time_axis": {"bin_width_ps": 0}}}, "bin_width_ps"),
+    ({"sensor": {"time_axis": {"zero_bin": "13"}}}, "zero_bin"),
 ]
 
 
