@@ -44,6 +44,9 @@ BENCHMARK_LABEL = MODELS[BENCHMARK_MODEL].get("label", BENCHMARK_MODEL)
 LEFT_OUT = check_left_out(config["train"]["left_out"], config["train"]["models"], BENCHMARK_MODEL)
 TRAINED_MODELS = [m for m in MODELS if m not in LEFT_OUT]
 LEFT_OUT_ARG = f"--left-out {shlex.quote(json.dumps(LEFT_OUT))}"
+# The histograms' time axis (sensor.time_axis), for every verb that turns bins
+# into time or path.
+TIME_AXIS_ARG = f"--time-axis {shlex.quote(json.dumps(config['sensor']['time_axis'], sort_keys=True))}"
 
 # The rules run `denali <verb>` through the interpreter that runs this
 # workflow, so jobs find the project whether or not its venv is activated,
