@@ -124,11 +124,6 @@ def test_select_locations():
         geo.select_locations(0)
 
 
-def test_time_axis():
-    assert geo.BIN_WIDTH_OPL * geo.N_BINS == pytest.approx(3.0)
-    assert geo.opl_to_bin(geo.HIST_START_OPL + 10 * geo.BIN_WIDTH_OPL) == pytest.approx(10)
-
-
 def test_the_paper_time_axis_is_the_reference_twins_exactly():
     """3/128 m of optical path a bin (78.2 ps), OPL 0 at bin 0's left edge: the
     old module constants, to the last bit (the workflow's outputs depend on them)."""

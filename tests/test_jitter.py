@@ -14,14 +14,13 @@ from denali_pipe.train.jitter import FWHM_PER_SIGMA, centre_zone, jitter, jitter
 
 # The figures below are in the paper's 78.2-ps bins.
 AXIS = PAPER_TIME_AXIS
-BIN_WIDTH_PS = AXIS.bin_width_ps
 
 
 @pytest.mark.parametrize("fwhm_ps", [50, 100, 600])
 def test_kernel_is_the_gaussian_integrated_over_each_bin(fwhm_ps):
     taps = jitter_kernel(fwhm_ps, AXIS)
     half = len(taps) // 2
-    sigma = fwhm_ps / BIN_WIDTH_PS / FWHM_PER_SIGMA
+    sigma = fwhm_ps / AXIS.bin_width_ps / FWHM_PER_SIGMA
     j = np.arange(-half, half + 1)
     expected = norm.cdf((j + 0.5) / sigma) - norm.cdf((j - 0.5) / sigma)
     assert taps.sum() == pytest.approx(1.0) and np.allclose(taps, taps[::-1])
@@ -39,7 +38,7 @@ def test_a_wide_kernel_has_the_gaussians_variance_plus_a_bins(axis):
 
 def test_sub_bin_jitter_still_blurs():
     taps = jitter_kernel(50, AXIS)  # 0.64 bins FWHM
-    sigma = 50 / BIN_WIDTH_PS / FWHM_PER_SIGMA
+    sigma = 50 / AXIS.bin_width_ps / FWHM_PER_SIGMA
     assert 0.03 < taps[len(taps) // 2 + 1] < 0.04
     assert math.exp(-0.5 / sigma**2) < 0.002  # what sampling the Gaussian at the neighbour's centre would give it
     assert np.array_equal(jitter_kernel(0, AXIS), [1.0])
@@ -105,7 +104,7 @@ def test_jitter_curve_has_every_task_metric_and_fwhm():
     curve = jitter_curve(pd.DataFrame(rows), AXIS)
     assert list(curve.metric.unique()) == ["loc_rmse", "loc_mae", "size_precision", "size_recall", "size_accuracy"]
     rmse = curve[curve.metric == "loc_rmse"]
-    assert list(rmse.fwhm_ps) == [0, 100, 600] and rmse.fwhm_bins.iloc[2] == pytest.approx(600 / BIN_WIDTH_PS)
+    assert list(rmse.fwhm_ps) == [0, 100, 600] and rmse.fwhm_bins.iloc[2] == pytest.approx(600 / AXIS.bin_width_ps)
     assert rmse["mean"].tolist() == pytest.approx([0.06, 0.07, 0.12]) and rmse["std"].iloc[0] == pytest.approx(0.02 / math.sqrt(2))
     assert (rmse.trivial == 0.1).all() and (curve.n_seeds == 2).all()
     with pytest.raises(ValueError, match="not jitter cells"):

@@ -28,15 +28,7 @@ import numpy as np
 # --- time axis -----------------------------------------------------------------
 
 N_BINS = 128
-BIN_WIDTH_OPL = 3.0 / 128  # m of optical path per bin (78 ps)
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
-BIN_WIDTH_PS = BIN_WIDTH_OPL / SPEED_OF_LIGHT * 1e12  # a bin's time, ps (78.2)
-HIST_START_OPL = 0.0  # sensor-relative OPL at the left edge of bin 0, m
-
-
-def opl_to_bin(opl: np.ndarray | float) -> np.ndarray | float:
-    """Fractional bin index of a sensor-relative optical path length (m)."""
-    return (np.asarray(opl) - HIST_START_OPL) / BIN_WIDTH_OPL
 
 
 @dataclass(frozen=True)
