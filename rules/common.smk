@@ -17,7 +17,7 @@ from denali_pipe.core.splits import SPLITS
 from denali_pipe.train.cells import DATASET_DIRS, LINEAR, TASKS, is_ill_posed, uses_gpu
 from denali_pipe.workflow.costs import combine, cost_model, frame_pixels, gpu_speedup, load_costs, mem_mb, predict, runtime_minutes, set_work, training_work
 from denali_pipe.train.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
-from denali_pipe.train.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
+from denali_pipe.train.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition, jitter_fwhm
 from denali_pipe.core.geometry import N_BINS, N_LOCATIONS, RESOLUTIONS, select_locations
 from denali_pipe.io.tree import survey_tree
 from denali_pipe.core.objects import BACKGROUNDS, VARIANTS, load_catalogue
@@ -44,6 +44,9 @@ BENCHMARK_LABEL = MODELS[BENCHMARK_MODEL].get("label", BENCHMARK_MODEL)
 LEFT_OUT = check_left_out(config["train"]["left_out"], config["train"]["models"], BENCHMARK_MODEL)
 TRAINED_MODELS = [m for m in MODELS if m not in LEFT_OUT]
 LEFT_OUT_ARG = f"--left-out {shlex.quote(json.dumps(LEFT_OUT))}"
+# The histograms' time axis (sensor.time_axis), for every verb that turns bins
+# into time or path.
+TIME_AXIS_ARG = f"--time-axis {shlex.quote(json.dumps(config['sensor']['time_axis'], sort_keys=True))}"
 
 # The rules run `denali <verb>` through the interpreter that runs this
 # workflow, so jobs find the project whether or not its venv is activated,
@@ -311,6 +314,11 @@ def factory_arg(wildcards):
 def budget_arg(wildcards):
     budget = TRAIN["budget_seconds"]
     return "" if budget is None or wildcards.model == LINEAR else f"--budget-seconds {budget}"
+
+
+def cell_time_axis_arg(wildcards):
+    # a jitter cell's blur alone reads the time axis: a new axis retrains no other cell
+    return TIME_AXIS_ARG if jitter_fwhm(wildcards.condition) is not None else ""
 
 
 # --- sim-to-real fit ----------------------------------------------------------

@@ -14,5 +14,6 @@ rule transforms:
     priority: SERIAL_CHAIN_PRIORITY
     params:
         config=FIT_JOB_CONFIG,
+        time_axis=TIME_AXIS_ARG,
     shell:
-        "{DENALI} transforms --features {input.features} --twins {input.twins} --config {params.config:q} --out {output} > {log} 2>&1"
+        "{DENALI} transforms --features {input.features} --twins {input.twins} --config {params.config:q} {params.time_axis} --out {output} > {log} 2>&1"

@@ -11,5 +11,7 @@ rule jitter:
         csv="results/jitter.csv",
     log:
         "logs/jitter/jitter.log",
+    params:
+        time_axis=TIME_AXIS_ARG,
     shell:
-        "{DENALI} jitter {input} --out {output.png} > {log} 2>&1"
+        "{DENALI} jitter {input} {params.time_axis} --out {output.png} > {log} 2>&1"

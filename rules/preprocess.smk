@@ -11,8 +11,10 @@ rule crop_window:
         "results/features/crop_{res}.json",
     log:
         "logs/features/crop_{res}.log",
+    params:
+        time_axis=TIME_AXIS_ARG,
     shell:
-        "{DENALI} crop-window {input.backgrounds} --scene {input.scene} --out {output} > {log} 2>&1"
+        "{DENALI} crop-window {input.backgrounds} --scene {input.scene} {params.time_axis} --out {output} > {log} 2>&1"
 
 
 rule preprocess:

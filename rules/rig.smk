@@ -23,8 +23,9 @@ if config["source"] == "synthetic":
         params:
             object=rig_object_arg,
             config=json.dumps({"seed": config["seed"], "rig": config["rig"]}, sort_keys=True),
+            time_axis=TIME_AXIS_ARG,
         shell:
-            "{DENALI} rig {output} {params.object} --config {params.config:q} > {log} 2>&1"
+            "{DENALI} rig {output} {params.object} --config {params.config:q} {params.time_axis} > {log} 2>&1"
 
 
 rule rig_examples:
@@ -36,8 +37,10 @@ rule rig_examples:
         csv="results/rig_examples.csv",
     log:
         "logs/rig_examples.log",
+    params:
+        time_axis=TIME_AXIS_ARG,
     shell:
-        "{DENALI} rig-examples --sets {input.sets} --backgrounds {input.backgrounds} --out {output.png} > {log} 2>&1"
+        "{DENALI} rig-examples --sets {input.sets} --backgrounds {input.backgrounds} {params.time_axis} --out {output.png} > {log} 2>&1"
 
 
 rule rig_vs_real:

@@ -30,9 +30,11 @@ rule train:
         validation=config["train"]["validation_fraction"],
         budget=budget_arg,
         precision=config["train"]["precision"],
+        time_axis=cell_time_axis_arg,
     shell:
         "{DENALI} train {input.x} --table {input.table} --cell {params.cell} --hyper {params.hyper} {params.factory}"
-        " --validation-fraction {params.validation} {params.budget} --threads {threads} --precision {params.precision} --outdir {params.outdir} > {log} 2>&1"
+        " --validation-fraction {params.validation} {params.budget} --threads {threads} --precision {params.precision} {params.time_axis}"
+        " --outdir {params.outdir} > {log} 2>&1"
 
 
 rule paper_dataset:

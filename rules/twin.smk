@@ -40,8 +40,9 @@ rule twin:
     params:
         object=rig_object_arg,
         config=TWIN_JOB_CONFIG,
+        time_axis=TIME_AXIS_ARG,
     shell:
-        "{DENALI} twin {input.scene} {params.object} --size {wildcards.size} --config {params.config:q} --out {output} > {log} 2>&1"
+        "{DENALI} twin {input.scene} {params.object} --size {wildcards.size} --config {params.config:q} {params.time_axis} --out {output} > {log} 2>&1"
 
 
 # The calibration's settings: the scene's, the material's and its own (analytic, so no renderer).
@@ -71,9 +72,10 @@ rule twin_calibration:
     params:
         objects=lambda w: json.dumps(sorted((CATALOGUE[s.object].to_dict() for s in {s.object: s for s in fit_sets()}.values()), key=lambda d: d["name"])),
         config=TWIN_CALIBRATION_CONFIG,
+        time_axis=TIME_AXIS_ARG,
     shell:
         "{DENALI} twin-calibration {input.scene} --features {input.features} --objects {params.objects:q} --config {params.config:q}"
-        " --out {output.json} --png {output.png} > {log} 2>&1"
+        " {params.time_axis} --out {output.json} --png {output.png} > {log} 2>&1"
 
 
 rule twin_calibrated:
@@ -91,8 +93,9 @@ rule twin_calibrated:
     params:
         object=rig_object_arg,
         config=TWIN_JOB_CONFIG,
+        time_axis=TIME_AXIS_ARG,
     shell:
-        "{DENALI} twin {input.scene} {params.object} --size {wildcards.size} --config {params.config:q}"
+        "{DENALI} twin {input.scene} {params.object} --size {wildcards.size} --config {params.config:q} {params.time_axis}"
         " --calibration {input.calibration} --out {output} > {log} 2>&1"
 
 
@@ -119,8 +122,9 @@ rule render_benchmark:
             },
             sort_keys=True,
         ),
+        time_axis=TIME_AXIS_ARG,
     shell:
-        "{DENALI} render-benchmark {input.scene} --objects {params.objects:q} --config {params.config:q} --out {output.png} > {log} 2>&1"
+        "{DENALI} render-benchmark {input.scene} --objects {params.objects:q} --config {params.config:q} {params.time_axis} --out {output.png} > {log} 2>&1"
 
 
 rule fig18:
@@ -138,6 +142,7 @@ rule fig18:
         "logs/fig18.log",
     params:
         config=json.dumps({"seed": config["seed"], "variant": TWIN["mitransient"]["variant"], "fig18": TWIN["fig18"]}, sort_keys=True),
+        time_axis=TIME_AXIS_ARG,
     shell:
         "{DENALI} fig18 {input.scene} --sets {input.sets} --backgrounds {input.backgrounds} --twins {input.twins}"
-        " --calibration {input.calibration} --crop {input.crop} --config {params.config:q} --out {output.png} > {log} 2>&1"
+        " --calibration {input.calibration} --crop {input.crop} --config {params.config:q} {params.time_axis} --out {output.png} > {log} 2>&1"

@@ -2,7 +2,7 @@
 """Which cue a trained localiser uses: permutation ablations on its test split.
 Prints figures, asserts nothing.
 
-    python scripts/ablate_cues.py RUN_DIR [RUN_DIR ...] [--results results] [--repeats 3]
+    python scripts/ablate_cues.py RUN_DIR [RUN_DIR ...] [--results results] [--repeats 3] [--config config/config.yaml]
 
 RUN_DIR is a location cell (`results/runs/<protocol>/<res>/<condition>/<split>/
 <model>_location/seed<N>`). Its test rows are rebuilt as the cell drew them
@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import yaml
 import zarr
 
 from denali_pipe.core import geometry as geo
@@ -71,14 +72,14 @@ def ablations(n: int, t: int) -> dict:
     return out
 
 
-def run(run_dir: Path, results: Path, repeats: int) -> None:
+def run(run_dir: Path, results: Path, repeats: int, axis: geo.TimeAxis) -> None:
     trained = load_cell(run_dir)
     cell = trained.cell
     if cell.task != "location":
         raise SystemExit(f"{run_dir}: a {cell.task} cell; this script ablates location cells")
     x = zarr.open_group(results / "datasets" / f"{cell.resolution}.zarr", mode="r")["x"][...]
     samples = pd.read_parquet(results / "datasets" / f"{cell.resolution}.parquet")
-    x, samples = condition_view(x, samples, cell.task, cell.condition)
+    x, samples = condition_view(x, samples, cell.task, cell.condition, axis)
     test = make_split(samples, cell.split, cell.seed).test
     x, y = x[test], samples.iloc[test][["x", "y"]].to_numpy(np.float64)
     n, t = x.shape[1], x.shape[-1]
@@ -104,9 +105,11 @@ def main() -> None:
     ap.add_argument("runs", nargs="+", type=Path)
     ap.add_argument("--results", type=Path, default=Path("results"))
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--config", type=Path, default=Path("config/config.yaml"), help="the run's config: its time axis blurs a jitter cell's input")
     args = ap.parse_args()
+    axis = geo.TimeAxis.from_config(yaml.safe_load(args.config.read_text())["sensor"]["time_axis"])
     for run_dir in args.runs:
-        run(run_dir, args.results, args.repeats)
+        run(run_dir, args.results, args.repeats, axis)
 
 
 if __name__ == "__main__":

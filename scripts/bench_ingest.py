@@ -69,6 +69,7 @@ def timed(fn, repeat: int = 3) -> float:
 
 def synth(tmp: Path, n_locations: int, scale: float):
     from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, parse_set_name
+    from denali_pipe.core.geometry import TimeAxis
     from denali_pipe.core.objects import load_catalogue
     from denali_pipe.rig.capture import synth_sets
 
@@ -80,8 +81,9 @@ def synth(tmp: Path, n_locations: int, scale: float):
     cs = parse_set_name(SET)
     rel, pkl = tmp / "raw" / f"{SET}{FOLDER_SUFFIX}", tmp / "raw" / f"{SET}{PICKLE_SUFFIX}"
     t = time.perf_counter()
-    synth_sets([cs], spec, cfg, [rel], "release")
-    synth_sets([cs], spec, cfg, [pkl], "pickle")
+    axis = TimeAxis.from_config(cfg["sensor"]["time_axis"])
+    synth_sets([cs], spec, cfg, axis, [rel], "release")
+    synth_sets([cs], spec, cfg, axis, [pkl], "pickle")
     print(f"rig: {n_locations} locations, frames at {scale} scale, release + pickle written in {time.perf_counter() - t:.1f} s")
     return spec, cs, rel, pkl
 

@@ -69,7 +69,8 @@ def main() -> None:
     ap.add_argument("--locations", nargs="+", type=int, default=[5, 45, 94])
     args = ap.parse_args()
     with open(args.config) as f:
-        phot = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
+        config = yaml.safe_load(f)
+    phot = H.Photometry.from_config(config["rig"]["photometry"], geo.TimeAxis.from_config(config["sensor"]["time_axis"]))
     catalogue = load_catalogue(REPO / "config" / "objects.tsv")
     for resolution in geo.RESOLUTIONS:
         bench(resolution, args.objects, args.locations, phot, catalogue)

@@ -28,7 +28,7 @@ import pandas as pd
 import yaml
 
 from denali_pipe.core.capture_sets import select_objects
-from denali_pipe.core.geometry import select_locations
+from denali_pipe.core.geometry import TimeAxis, select_locations
 from denali_pipe.core.meshes import object_mesh
 from denali_pipe.core.objects import load_catalogue
 from denali_pipe.twin.benchmark import benchmark_scenes, nl2, run_benchmark
@@ -61,7 +61,7 @@ def main() -> None:
         sweep(cal, specs, cfg, settings, args.samples)
     else:
         t0 = time.perf_counter()
-        summary, per_scene = run_benchmark(cal, specs, cfg["sizes"], settings, cfg["seed"])
+        summary, per_scene = run_benchmark(cal, specs, cfg["sizes"], settings, TimeAxis.from_config(cfg["sensor"]["time_axis"]), cfg["seed"])
         print(summary.to_string(index=False))
         print(per_scene.to_string(index=False))
         print(f"total {time.perf_counter() - t0:.0f} s")
@@ -77,9 +77,10 @@ def sweep(cal, specs, cfg, settings, samples: list[int]) -> None:
     from denali_pipe.twin.mitransient import MitransientRenderer
 
     scenes = benchmark_scenes(specs, cfg["sizes"], cal.locations, settings["benchmark"]["n_scenes"], cfg["seed"])
+    axis = TimeAxis.from_config(cfg["sensor"]["time_axis"])
     rows = []
     for sc in scenes:
-        twin = twin_scene(cal, object_mesh(sc.spec, sc.size), settings, relays=(zone_footprint(cal),))  # the centre zone
+        twin = twin_scene(cal, object_mesh(sc.spec, sc.size), settings, axis, relays=(zone_footprint(cal),))  # the centre zone
         ref = (
             MitransientRenderer(twin, settings["benchmark"]["reference_spp"], settings["mitransient"]["max_depth"], 1).render(sc.location).mean(axis=(0, 1, 2))
         )

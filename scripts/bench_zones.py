@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from denali_pipe.core.geometry import TimeAxis
 from denali_pipe.core.objects import load_catalogue
 from denali_pipe.report.paper import REAL_ZONE_MEANS
 from denali_pipe.report.rig_vs_real import REAL_LOG_SPREAD, zone_pattern
@@ -43,7 +44,8 @@ def main() -> None:
     ap.add_argument("--config", type=Path, default=REPO / "config" / "config.yaml")
     args = ap.parse_args()
     with open(args.config) as f:
-        phot = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
+        config = yaml.safe_load(f)
+    phot = H.Photometry.from_config(config["rig"]["photometry"], TimeAxis.from_config(config["sensor"]["time_axis"]))
     catalogue = load_catalogue(REPO / "config" / "objects.tsv")
 
     rng = np.random.default_rng(0)

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from denali_pipe.core.geometry import PAPER_TIME_AXIS
 from denali_pipe.core.objects import load_catalogue
 from denali_pipe.twin import calibrate as C
 from denali_pipe.twin.layout import load_calibration, perturbed_scene
@@ -54,6 +55,8 @@ SETTINGS = {
     },
 }  # fmt: skip
 CROP, BINS, REPEATS = 60, 60, 3
+# Any axis will do: the captures are planted through the same model.
+AXIS = PAPER_TIME_AXIS
 
 
 def draw_truth(rng: np.random.Generator) -> np.ndarray:
@@ -93,13 +96,13 @@ def planting(seed: int, noise: float, catalogue: dict, workdir: Path) -> pd.Data
     specs = {name: catalogue[name] for name, _ in OBJECTS}
     keys = pd.DataFrame([(f"{o}_{s}_3x3_lighton", o, s, loc) for o, s in OBJECTS for loc in locations], columns=["set", "object", "size", "location"])
     dummy = C.Captures(np.zeros((len(keys), REPEATS, C.GRID, C.GRID, BINS), np.float32), keys, CROP)
-    problem = C.Problem(C.Model(cal, specs, keys, SETTINGS), dummy, SETTINGS)
+    problem = C.Problem(C.Model(cal, specs, keys, SETTINGS, AXIS), dummy, SETTINGS)
     truth = draw_truth(rng)
     m = problem.twins(truth)
     gains = rng.uniform(0.5, 2, C.ZONES) * 1e3 / m.max()
     peak = float((gains[None, :, None] * m).max())
     captures = C.planted_captures(problem, truth, gains, noise * peak, REPEATS, rng)
-    result, _, _ = C.calibrate(cal, specs, captures, SETTINGS, seed)
+    result, _, _ = C.calibrate(cal, specs, captures, SETTINGS, AXIS, seed)
     want, got = coordinates(C.to_physical(truth, SETTINGS)), coordinates(C.to_physical(result.x, SETTINGS))
     interval = coordinates(result.interval)
     rows = []

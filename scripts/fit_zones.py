@@ -286,7 +286,8 @@ def main() -> None:
     if args.family_floor and args.features is None:
         ap.error("--family-floor needs --features")
     with open(args.config) as f:
-        base = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
+        config = yaml.safe_load(f)
+    base = H.Photometry.from_config(config["rig"]["photometry"], geo.TimeAxis.from_config(config["sensor"]["time_axis"]))
     catalogue = load_catalogue(REPO / "config" / "objects.tsv")
     nets = fm.load_backbones(args.features) if args.features else None
     start = from_photometry(base, features=nets is not None, family=args.family_floor)

@@ -72,7 +72,8 @@ def main() -> None:
     ap.add_argument("--config", type=Path, default=REPO / "config" / "config.yaml")
     args = ap.parse_args()
     with open(args.config) as f:
-        phot = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
+        config = yaml.safe_load(f)
+    phot = H.Photometry.from_config(config["rig"]["photometry"], geo.TimeAxis.from_config(config["sensor"]["time_axis"]))
     scene = design_scene(load_catalogue(REPO / "config" / "objects.tsv")["hexagon"], "8inch", 84)
     rig = H.expected_counts("3x3", False, scene, phot).reshape(9, -1)
     real = panels(args.figure)

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from denali_pipe.core.geometry import N_LOCATIONS
+from denali_pipe.core.geometry import N_LOCATIONS, TimeAxis
 from denali_pipe.core.objects import load_catalogue
 from denali_pipe.report.paper import REAL_LOG_ZONE_MEANS, REAL_ZONE_MEANS
 from denali_pipe.rig import feature_moments as fm
@@ -114,8 +114,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
     with open(args.config) as f:
-        rig = yaml.safe_load(f)["rig"]
-    phot = H.Photometry.from_config(rig["photometry"])
+        config = yaml.safe_load(f)
+    rig = config["rig"]
+    phot = H.Photometry.from_config(rig["photometry"], TimeAxis.from_config(config["sensor"]["time_axis"]))
     nets = fm.load_backbones(args.stats)
     lights = scenes(load_catalogue(REPO / "config" / "objects.tsv"), phot, args.scenes, args.seed)
     change = lambda **kw: dataclasses.replace(phot, **kw)  # noqa: E731

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from denali_pipe.core.geometry import N_LOCATIONS
+from denali_pipe.core.geometry import N_LOCATIONS, TimeAxis
 from denali_pipe.core.objects import load_catalogue
 from denali_pipe.rig import feature_moments as fm
 from denali_pipe.rig import histograms as H
@@ -131,8 +131,9 @@ def main() -> None:
     ap.add_argument("--terms", action="store_true", help="also the contrast with each response term changed")
     args = ap.parse_args()
     with open(args.config) as f:
-        rig_config = yaml.safe_load(f)["rig"]
-    phot = H.Photometry.from_config(rig_config["photometry"])
+        config = yaml.safe_load(f)
+    rig_config = config["rig"]
+    phot = H.Photometry.from_config(rig_config["photometry"], TimeAxis.from_config(config["sensor"]["time_axis"]))
     catalogue = load_catalogue(REPO / "config" / "objects.tsv")
     real = fm.real_log_moments_by_size(fm.load_backbones(args.stats))
     transports = paired_transports(catalogue, phot, args.scenes, args.seed)

@@ -24,6 +24,14 @@ def demo_config() -> dict:
         return yaml.safe_load(f)
 
 
+@pytest.fixture(scope="session")
+def time_axis(demo_config):
+    """The configured time axis of the histograms (config `sensor.time_axis`)."""
+    from denali_pipe.core.geometry import TimeAxis
+
+    return TimeAxis.from_config(demo_config["sensor"]["time_axis"])
+
+
 # The end-to-end files run whole DAGs for minutes; under `pytest -n` (the
 # Makefile's `make test`, with --no-loadscope-reorder) each file runs on one
 # worker in collection order, two queued per worker from the start. So the

@@ -42,7 +42,7 @@ def synth(names, spec, config, out_dir: Path, fmt="release") -> list[Path]:
     """Run `synth_sets` for set names into `out_dir`; returns the output paths."""
     suffix = FOLDER_SUFFIX if fmt == "release" else PICKLE_SUFFIX
     outs = [out_dir / f"{n}{suffix}" for n in names]
-    capture.synth_sets([parse_set_name(n) for n in names], spec, config, outs, fmt)
+    capture.synth_sets([parse_set_name(n) for n in names], spec, config, geo.TimeAxis.from_config(config["sensor"]["time_axis"]), outs, fmt)
     return outs
 
 

@@ -25,6 +25,12 @@ def job_config(demo_config) -> dict:
     return {"seed": demo_config["seed"], "rig": rig}
 
 
+@pytest.fixture(scope="module")
+def job_args(job_config, demo_config) -> list[str]:
+    """The rig rule's --config and --time-axis."""
+    return ["--config", json.dumps(job_config), "--time-axis", json.dumps(demo_config["sensor"]["time_axis"])]
+
+
 @pytest.fixture
 def log(caplog):
     caplog.set_level(logging.INFO, logger="denali")
@@ -39,9 +45,9 @@ def errors(caplog) -> list[str]:
     return [r.getMessage() for r in caplog.records if r.name == "denali" and r.levelno >= logging.ERROR]
 
 
-def test_synth_writes_sets(tmp_path, catalogue, job_config, log):
+def test_synth_writes_sets(tmp_path, catalogue, job_args, log):
     outs = [tmp_path / f"A_4inch_{res}_lightoff_NLOSdata" for res in ("3x3", "8x8")]
-    rc = main(["rig", *map(str, outs), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)])
+    rc = main(["rig", *map(str, outs), *obj_arg(catalogue, "A"), *job_args])
     assert rc == 0
     assert errors(log) == []
     assert any("wrote" in r.getMessage() for r in log.records)
@@ -56,19 +62,19 @@ def test_synth_writes_sets(tmp_path, catalogue, job_config, log):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(o.name for o in outs)
 
 
-def test_synth_matches_library_call(tmp_path, catalogue, job_config, log):
+def test_synth_matches_library_call(tmp_path, catalogue, job_config, job_args, time_axis, log):
     cli_out = tmp_path / "cli" / "A_4inch_3x3_lighton_NLOSdata"
     lib_out = tmp_path / "lib" / "A_4inch_3x3_lighton_NLOSdata"
-    assert main(["rig", str(cli_out), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)]) == 0
-    synth_sets([parse_set_name(lib_out.name)], catalogue["A"], job_config, [lib_out], "release")
+    assert main(["rig", str(cli_out), *obj_arg(catalogue, "A"), *job_args]) == 0
+    synth_sets([parse_set_name(lib_out.name)], catalogue["A"], job_config, time_axis, [lib_out], "release")
     for p in sorted(lib_out.rglob("*")):
         if p.is_file():
             assert (cli_out / p.relative_to(lib_out)).read_bytes() == p.read_bytes(), p
 
 
-def test_synth_background_and_pickle(tmp_path, job_config, log):
+def test_synth_background_and_pickle(tmp_path, job_args, log):
     out = tmp_path / "NOOBJECTMOUNT_8inch_3x3_lighton_short_NLOSdata.pkl"
-    assert main(["rig", str(out), "--config", json.dumps(job_config), "--format", "pickle"]) == 0
+    assert main(["rig", str(out), *job_args, "--format", "pickle"]) == 0
     assert out.is_file()
     assert (tmp_path / "NOOBJECTMOUNT_8inch_3x3_lighton_rig_truth.json").is_file()
     assert errors(log) == []
@@ -83,9 +89,9 @@ def test_synth_background_and_pickle(tmp_path, job_config, log):
         ("A_4inch_3x3_lighton", None),  # an object set needs one
     ],
 )
-def test_object_record_must_match_set(tmp_path, catalogue, job_config, log, set_name, record):
+def test_object_record_must_match_set(tmp_path, catalogue, job_args, log, set_name, record):
     out = tmp_path / f"{set_name}_NLOSdata"
-    args = ["rig", str(out), "--config", json.dumps(job_config)]
+    args = ["rig", str(out), *job_args]
     if record is not None:
         args += obj_arg(catalogue, record)
     assert main(args) == 1
@@ -94,35 +100,35 @@ def test_object_record_must_match_set(tmp_path, catalogue, job_config, log, set_
     assert list(tmp_path.iterdir()) == []
 
 
-def test_object_record_must_match_every_set(tmp_path, catalogue, job_config, log):
+def test_object_record_must_match_every_set(tmp_path, catalogue, job_args, log):
     outs = [tmp_path / "A_8inch_3x3_lighton_NLOSdata", tmp_path / "B_8inch_3x3_lighton_NLOSdata"]
-    assert main(["rig", *map(str, outs), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)]) == 1
+    assert main(["rig", *map(str, outs), *obj_arg(catalogue, "A"), *job_args]) == 1
     (msg,) = errors(log)
     assert "B_8inch_3x3_lighton" in msg
     assert list(tmp_path.iterdir()) == []
 
 
-def test_object_record_without_the_size(tmp_path, catalogue, job_config, log):
+def test_object_record_without_the_size(tmp_path, catalogue, job_args, log):
     # the italic plates exist at 8 in only
     out = tmp_path / "generalization1italic_4inch_3x3_lighton_NLOSdata"
-    assert main(["rig", str(out), *obj_arg(catalogue, "generalization1italic"), "--config", json.dumps(job_config)]) == 1
+    assert main(["rig", str(out), *obj_arg(catalogue, "generalization1italic"), *job_args]) == 1
     (msg,) = errors(log)
     assert "4inch" in msg
     assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("name", ["A_4inch_3x3_lightsout_NLOSdata", "capture_042", "A_6inch_3x3_lighton_NLOSdata"])
-def test_unparsable_output_name(tmp_path, catalogue, job_config, log, name):
+def test_unparsable_output_name(tmp_path, catalogue, job_args, log, name):
     out = tmp_path / name
-    assert main(["rig", str(out), *obj_arg(catalogue, "A"), "--config", json.dumps(job_config)]) == 1
+    assert main(["rig", str(out), *obj_arg(catalogue, "A"), *job_args]) == 1
     (msg,) = errors(log)
     assert name in msg and "does not parse" in msg
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("option", ["--config", "--object"])
-def test_invalid_json_is_an_argument_error(tmp_path, job_config, capsys, option):
-    args = ["rig", str(tmp_path / "A_4inch_3x3_lighton_NLOSdata"), "--config", json.dumps(job_config)]
+@pytest.mark.parametrize("option", ["--config", "--object", "--time-axis"])
+def test_invalid_json_is_an_argument_error(tmp_path, job_args, capsys, option):
+    args = ["rig", str(tmp_path / "A_4inch_3x3_lighton_NLOSdata"), *job_args]
     args += [option, "{seed: 1,"]
     with pytest.raises(SystemExit) as e:
         main(args)
@@ -132,9 +138,9 @@ def test_invalid_json_is_an_argument_error(tmp_path, job_config, capsys, option)
     assert list(tmp_path.iterdir()) == []
 
 
-def test_unknown_format_is_an_argument_error(tmp_path, job_config, capsys):
+def test_unknown_format_is_an_argument_error(tmp_path, job_args, capsys):
     with pytest.raises(SystemExit) as e:
-        main(["rig", str(tmp_path / "NOOBJECT_8inch_3x3_lighton_NLOSdata"), "--config", json.dumps(job_config), "--format", "zarr"])
+        main(["rig", str(tmp_path / "NOOBJECT_8inch_3x3_lighton_NLOSdata"), *job_args, "--format", "zarr"])
     assert e.value.code == 2
     assert "--format" in capsys.readouterr().err
 

@@ -91,24 +91,26 @@ def test_ill_posed_conditions(samples):
     assert ill_posed(dark, "location", "jitter100ps") == "condition jitter100ps keeps no sample"
 
 
-def test_condition_view(samples):
+def test_condition_view(samples, time_axis):
     x = np.random.default_rng(0).normal(size=(len(samples), 3, 3, 20)).astype(np.float32)
     same, kept = condition_view(x, samples, "shape", ALL)
     assert same is x and kept.equals(samples)
     back, kept = condition_view(x, samples, "size", "back_quadrant")
     mask = condition_mask(samples, "back_quadrant")
     assert np.array_equal(back, x[mask]) and list(kept.index) == list(range(mask.sum()))
-    blurred, kept = condition_view(x, samples, "location", "jitter100ps")
+    blurred, kept = condition_view(x, samples, "location", "jitter100ps", time_axis)
     lit = (samples.light == "lighton").to_numpy()
     assert blurred.shape == (lit.sum(), 1, 1, 20) and (kept.light == "lighton").all()
-    assert np.array_equal(blurred, jitter(centre_zone(x[lit]), 100))
+    assert np.array_equal(blurred, jitter(centre_zone(x[lit]), 100, time_axis))
+    with pytest.raises(ValueError, match="jitter100ps blurs in ps: it needs the captures' time axis"):
+        condition_view(x, samples, "location", "jitter100ps")
     with pytest.raises(ValueError, match="size is ill-posed: condition 4inch leaves one size class"):
         condition_view(x, samples, "size", "4inch")
     with pytest.raises(ValueError, match="3x3 histograms"):
-        condition_view(np.zeros((len(samples), 8, 8, 20), np.float32), samples, "shape", "jitter0ps")
+        condition_view(np.zeros((len(samples), 8, 8, 20), np.float32), samples, "shape", "jitter0ps", time_axis)
 
 
-def test_denali_train_trains_and_tests_within_the_condition(tmp_path, samples, caplog):
+def test_denali_train_trains_and_tests_within_the_condition(tmp_path, samples, caplog, demo_config):
     sub = samples[samples.location % 10 < 2].reset_index(drop=True)  # 20 locations: a small, quick cell
     x = np.random.default_rng(1).poisson(5.0, size=(len(sub), 3, 3, 16)).astype(np.float32)
     write_dataset(x, sub, tmp_path / "3x3.zarr", tmp_path / "3x3.parquet", crop_start=70)
@@ -129,6 +131,8 @@ def test_denali_train_trains_and_tests_within_the_condition(tmp_path, samples, c
             "--factory",
             "denali_pipe.train.models:cnn1d",
         ]
+        if condition.startswith("jitter"):  # as the rule passes it: to the jitter cells alone
+            args += ["--time-axis", json.dumps(demo_config["sensor"]["time_axis"])]
         return main([*args, "--validation-fraction", "0.2", "--outdir", str(out)]), out
 
     rc, out = train("shape", "light_off")

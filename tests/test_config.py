@@ -15,6 +15,7 @@ from conftest import REPO
 from snakemake.utils import update_config, validate
 
 from denali_pipe.core.capture_sets import expected_sets
+from denali_pipe.core.geometry import PAPER_TIME_AXIS, TimeAxis
 from denali_pipe.core.objects import BACKGROUNDS, load_catalogue
 
 SCHEMA = str(REPO / "config" / "schema.yaml")
@@ -66,6 +67,12 @@ def test_release_preset_is_the_whole_release_at_the_paper_schedules(catalogue):
     # every object of the sheet at each of its sizes and both backgrounds, at 2 resolutions x 2 lightings
     n_sets = sum(len(spec.sizes) for spec in catalogue.values()) + len(BACKGROUNDS)
     assert len(expected_sets(catalogue, cfg)) == n_sets * 2 * 2
+
+
+def test_the_paper_preset_keeps_the_reference_twins_time_axis():
+    """The paper's bins, to the last bit, whatever config.yaml's default axis."""
+    cfg = merged(load(REPO / "config" / "presets" / "paper.yaml"))
+    assert TimeAxis.from_config(cfg["sensor"]["time_axis"]) == PAPER_TIME_AXIS
 
 
 @pytest.mark.parametrize("preset", PRESETS, ids=lambda p: p.stem)
@@ -125,6 +132,8 @@ BAD = [
     ({"bogus": 1}, "bogus"),
     ({"rig": {"n_location": 3}}, "n_location"),
     ({"rig": {"frames": {"scale": 0.5}}}, "scale"),
+    ({"sensor": {"time_axis": {"bin_width_ps": 0}}}, "bin_width_ps"),
+    ({"sensor": {"time_axis": {"zero_bin": "13"}}}, "zero_bin"),
 ]
 
 

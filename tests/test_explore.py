@@ -13,7 +13,7 @@ from browser import chromium, ensure_chromium, explorer, wait_for
 from test_train import _cell, data  # noqa: F401 (the fixture)
 
 from denali_pipe.core.capture_sets import CaptureSet
-from denali_pipe.core.geometry import N_LOCATIONS, gantry_row_col
+from denali_pipe.core.geometry import N_LOCATIONS, TimeAxis, gantry_row_col
 from denali_pipe.explore.app import pick_choice, pick_set
 from denali_pipe.explore.capture import Calibration, gantry_grid
 from denali_pipe.explore.figures import histogram_grid, title
@@ -128,7 +128,9 @@ def test_the_page_over_an_empty_results_folder_says_what_to_build(tmp_path):
 def test_the_histogram_grid_is_a_valid_figure_with_a_subplot_per_zone(n):
     rng = np.random.default_rng(0)
     counts, background = rng.poisson(900, (n, n, 128)), np.full((n, n, 128), 900.0)
-    fig = go.Figure(histogram_grid(counts, background, np.full((n, n), 71), True, title("raw"), "plotly_dark"))  # plotly validates every key
+    axis = TimeAxis(bin_width_ps=93.0, zero_bin=16.0)
+    fig = go.Figure(histogram_grid(counts, background, np.full((n, n), 71), True, axis, title("raw"), "plotly_dark"))  # plotly validates every key
+    assert fig.layout[f"xaxis{(n - 1) * n + (n + 1) // 2}"].title.text == "time bin (93 ps)"  # the bin's time on the captures' axis
     assert len(fig.data) == 2 * n * n and len(fig.layout.shapes) == n * n
     last = fig.data[-2]  # the bottom-right zone's capture, on its own axes
     assert (last.xaxis, last.yaxis) == (f"x{n * n}", f"y{n * n}") and np.array_equal(last.y, counts[-1, -1])

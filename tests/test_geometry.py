@@ -124,9 +124,38 @@ def test_select_locations():
         geo.select_locations(0)
 
 
-def test_time_axis():
-    assert geo.BIN_WIDTH_OPL * geo.N_BINS == pytest.approx(3.0)
-    assert geo.opl_to_bin(geo.HIST_START_OPL + 10 * geo.BIN_WIDTH_OPL) == pytest.approx(10)
+def test_the_paper_time_axis_is_the_reference_twins_exactly():
+    """3/128 m of optical path a bin (78.2 ps), OPL 0 at bin 0's left edge: the
+    old module constants, to the last bit (the workflow's outputs depend on them)."""
+    axis = geo.PAPER_TIME_AXIS
+    assert axis.bin_width_opl == 3.0 / 128 and axis.bin_width_opl * geo.N_BINS == 3.0
+    assert axis.bin_width_ps == 3.0 / 128 / geo.SPEED_OF_LIGHT * 1e12 == pytest.approx(78.18, abs=0.005)
+    assert axis.start_opl == 0.0 and str(axis.start_opl) == "0.0"  # not -0.0: it is written to JSON
+    opl = np.linspace(-0.5, 3.5, 101)
+    assert np.array_equal(axis.opl_to_bin(opl), (opl - 0.0) / (3.0 / 128))
+    assert axis.opl_to_bin(10 * 3.0 / 128) == 10
+
+
+def test_a_time_axis_puts_zero_path_at_its_zero_bins_centre():
+    axis = geo.TimeAxis(bin_width_ps=93.0, zero_bin=16.0)
+    assert axis.bin_width_opl == pytest.approx(93e-12 * geo.SPEED_OF_LIGHT)
+    assert axis.opl_to_bin(0.0) == pytest.approx(16.5)  # bin b covers [b, b + 1): the centre of bin 16
+    assert axis.start_opl == pytest.approx(-16.5 * axis.bin_width_opl)
+    assert axis.opl_to_bin(axis.start_opl) == pytest.approx(0.0)
+    # bin b covers OPL [(b - 0.5 - zero_bin) w, (b + 0.5 - zero_bin) w)
+    b = np.arange(geo.N_BINS)
+    w = axis.bin_width_opl
+    assert np.allclose(axis.opl_to_bin((b - 0.5 - axis.zero_bin) * w), b)
+    assert np.allclose(axis.opl_to_bin((b + 0.5 - axis.zero_bin) * w), b + 1)
+    # round trip: a bin coordinate to OPL and back
+    x = np.linspace(-3.0, 130.0, 57)
+    assert np.allclose(axis.opl_to_bin(axis.start_opl + x * w), x)
+
+
+def test_a_time_axis_comes_from_its_config_block():
+    assert geo.TimeAxis.from_config({"bin_width_ps": 93, "zero_bin": 13}) == geo.TimeAxis(93.0, 13.0)
+    with pytest.raises(KeyError):
+        geo.TimeAxis.from_config({"bin_width_ps": 93.0})
 
 
 def test_centre_zone_is_the_middle_of_the_grid():

@@ -12,10 +12,13 @@ from denali_pipe.rig import histograms as H
 from denali_pipe.rig.measure import early_share, measure, zone_shape
 from denali_pipe.rig.scene import design_scene, mount_scatterer, object_scatterer
 
+# A measured-like time axis (docs/sensor.md): 93 ps a bin, zero path at bin 16.
+AXIS_93 = geo.TimeAxis(bin_width_ps=93.0, zero_bin=16.0)
+
 
 @pytest.fixture(scope="module")
-def phot(demo_config):
-    return H.Photometry.from_config(demo_config["rig"]["photometry"])
+def phot(demo_config, time_axis):
+    return H.Photometry.from_config(demo_config["rig"]["photometry"], time_axis)
 
 
 def plate(centre, normal, side=0.2, spacing=0.01, rho_diffuse=0.0, rho_retro=0.6):
@@ -50,7 +53,7 @@ def test_bump_arrives_later_with_distance(phot, shift):
     normal = -geo.WALL.normal
     h_near = object_only("3x3", [plate(near, normal)], phot)[1, 1]
     h_far = object_only("3x3", [plate(far, normal)], phot)[1, 1]
-    expected = 2 * shift / geo.BIN_WIDTH_OPL
+    expected = 2 * shift / phot.time_axis.bin_width_opl
     assert peak_bin(h_far) - peak_bin(h_near) == pytest.approx(expected, abs=1.0)
 
 
@@ -175,7 +178,19 @@ def test_direct_return_sits_at_the_wall_distance(phot):
     h = H.expected_counts("3x3", False, [], phot)[1, 1]
     r = H.wall_samples("3x3").r[4]
     # pulse delay: the exGaussian's mode lies a little after the true arrival
-    assert peak_bin(h) == pytest.approx(geo.opl_to_bin(2 * r.mean()), abs=2.5)
+    assert peak_bin(h) == pytest.approx(phot.time_axis.opl_to_bin(2 * r.mean()), abs=2.5)
+
+
+def test_the_rig_renders_on_its_time_axis(phot):
+    """On a 93-ps axis with zero path at bin 16 the wall return moves by what
+    geometry says it moves between the two axes (the pulse's delay, in bins,
+    and the wall's spread, in metres, move it within half a bin)."""
+    other = dataclasses.replace(phot, time_axis=AXIS_93)
+    opl = 2 * H.wall_samples("3x3").r[4].mean()
+    move = AXIS_93.opl_to_bin(opl) - phot.time_axis.opl_to_bin(opl)
+    assert abs(move) > 5  # a move the test can see
+    peaks = [peak_bin(H.expected_counts("3x3", False, [], p)[1, 1]) for p in (phot, other)]
+    assert peaks[1] - peaks[0] == pytest.approx(move, abs=0.5)
 
 
 def test_noise_is_poisson_plus_read(phot):

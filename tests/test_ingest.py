@@ -48,9 +48,11 @@ def raw(tmp_path_factory, demo_config, spec) -> dict[str, Path]:
     cfg["rig"].update(n_locations=N_LOCATIONS, repeats=REPEATS, frames={"tracking_scale": SCALE, "colocated_scale": SCALE})
     rel, pkl = tmp_path_factory.mktemp("release"), tmp_path_factory.mktemp("pickle")
     sets = [parse_set_name(n) for n in OBJECT_SETS]
-    capture.synth_sets(sets, spec, cfg, [rel / f"{n}{FOLDER_SUFFIX}" for n in OBJECT_SETS], "release")
-    capture.synth_sets(sets, spec, cfg, [pkl / f"{n}{PICKLE_SUFFIX}" for n in OBJECT_SETS], "pickle")
-    capture.synth_sets([parse_set_name(BACKGROUND_SET)], None, cfg, [rel / f"{BACKGROUND_SET}{FOLDER_SUFFIX}"], "release")
+    capture.synth_sets(sets, spec, cfg, geo.TimeAxis.from_config(cfg["sensor"]["time_axis"]), [rel / f"{n}{FOLDER_SUFFIX}" for n in OBJECT_SETS], "release")
+    capture.synth_sets(sets, spec, cfg, geo.TimeAxis.from_config(cfg["sensor"]["time_axis"]), [pkl / f"{n}{PICKLE_SUFFIX}" for n in OBJECT_SETS], "pickle")
+    capture.synth_sets(
+        [parse_set_name(BACKGROUND_SET)], None, cfg, geo.TimeAxis.from_config(cfg["sensor"]["time_axis"]), [rel / f"{BACKGROUND_SET}{FOLDER_SUFFIX}"], "release"
+    )
     out = {n: rel / f"{n}{FOLDER_SUFFIX}" for n in [*OBJECT_SETS, BACKGROUND_SET]}
     out |= {f"{n}.pkl": pkl / f"{n}{PICKLE_SUFFIX}" for n in OBJECT_SETS}
     return out

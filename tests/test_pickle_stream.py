@@ -18,6 +18,7 @@ import pytest
 from conftest import REPO
 
 from denali_pipe.core.capture_sets import PICKLE_SUFFIX, parse_set_name
+from denali_pipe.core.geometry import TimeAxis
 from denali_pipe.core.objects import load_catalogue
 from denali_pipe.io.pickle_stream import (
     ALLOWED_GLOBALS,
@@ -42,7 +43,7 @@ def stream(tmp_path_factory, demo_config) -> Path:
     cfg["rig"].update(n_locations=3, repeats=3, frames={"tracking_scale": 0.25, "colocated_scale": 0.25})
     out = tmp_path_factory.mktemp("pkl") / f"{SET}{PICKLE_SUFFIX}"
     spec = load_catalogue(REPO / "config" / "objects.tsv")["A"]
-    capture.synth_sets([parse_set_name(SET)], spec, cfg, [out], "pickle")
+    capture.synth_sets([parse_set_name(SET)], spec, cfg, TimeAxis.from_config(cfg["sensor"]["time_axis"]), [out], "pickle")
     return out
 
 

@@ -56,7 +56,7 @@ def _capture(tmp: Path, config: dict, names: list[str]) -> tuple[dict[str, Path]
     spec = load_catalogue(REPO / "config" / "objects.tsv")["A"]
     raw, out = tmp / "raw", tmp / "stores"
     dirs = [raw / f"{n}{FOLDER_SUFFIX}" for n in names]
-    capture.synth_sets([parse_set_name(n) for n in names], spec, config, dirs, "release")
+    capture.synth_sets([parse_set_name(n) for n in names], spec, config, geo.TimeAxis.from_config(config["sensor"]["time_axis"]), dirs, "release")
     stores, truths = {}, {}
     for n, d in zip(names, dirs):
         truths[n] = json.loads((d / capture.TRUTH_FILE).read_text())

@@ -195,12 +195,12 @@ def test_condition_tables_show_the_groups_trained(tmp_path):
     assert (t.loc_outside_workspace == 0.1).all() and (t.loc_outside_workspace_std == 0.0).all()
 
 
-def test_jitter_figure(tmp_path):
+def test_jitter_figure(tmp_path, time_axis):
     paths = [
         _write_cell(tmp_path, "cnn1d", task, "random", seed, condition=jitter_condition(fwhm), score=fwhm / 1e4 + 0.01 * i) / "metrics.json"
         for task in TASKS for fwhm in (0, 50, 100, 600) for i, seed in enumerate((42, 43))
     ]  # fmt: skip
-    plot_jitter(jitter_curve(load_runs(paths)), "jitter", tmp_path / "jitter.png")
+    plot_jitter(jitter_curve(load_runs(paths), time_axis), "jitter", time_axis, tmp_path / "jitter.png")
     assert (tmp_path / "jitter.png").stat().st_size > 10_000
     curve = pd.read_csv(tmp_path / "jitter.csv")
     assert len(curve) == 8 * 4 and set(curve.task) == set(TASKS)

@@ -30,10 +30,10 @@ def write_store(out, name, scene_at, phot, rng):
 
 
 @pytest.fixture(scope="module")
-def pairs(tmp_path_factory, demo_config, catalogue):
+def pairs(tmp_path_factory, demo_config, time_axis, catalogue):
     """Square 8 in and 4 in, both lightings, at LOCATIONS, 2 repeats each, with their backgrounds."""
     out = tmp_path_factory.mktemp("rig_vs_real")
-    phot = H.Photometry.from_config(demo_config["rig"]["photometry"])
+    phot = H.Photometry.from_config(demo_config["rig"]["photometry"], time_axis)
     rng = np.random.default_rng(0)
     mount = lambda k: [mount_scatterer(geo.object_pose(k).t)]  # noqa: E731
     bgs = {light: write_store(out, f"NOOBJECT_8inch_3x3_{light}", mount, phot, rng) for light in ("lightoff", "lighton")}

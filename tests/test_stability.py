@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from denali_pipe.cli import main
+from denali_pipe.core.geometry import PAPER_TIME_AXIS
 from denali_pipe.report.stability import COLUMNS, cell_id, write_stability
 from denali_pipe.train.cell_metrics import CellMetrics
 from denali_pipe.train.cells import Cell
@@ -71,7 +72,7 @@ def transforms_file(path, mode, unidentified):
     t = Transforms(2.0, 1.0, tuple(np.eye(KERNEL_BINS)[KERNEL_BINS // 2]), 1.0, 0.0)
     boot = Bootstrap(30, 0, 0.9, {}, {}, 0.01, 0)
     checks = [FitCheck(3.0, boot, None, unidentified.get(z, {})) for z in range(ZONES)]
-    write_transforms(path, ZoneTransforms(mode, (t,) * ZONES), checks, {})
+    write_transforms(path, ZoneTransforms(mode, (t,) * ZONES), checks, PAPER_TIME_AXIS, {})
     return path
 
 

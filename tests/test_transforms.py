@@ -388,7 +388,7 @@ def test_transforms_file_round_trip_and_bad_file(tmp_path):
     )
     check = FitCheck(1.5, boot, {"a_noise": 0.3, "b_noise": 2.0}, {"a_noise": "standard error 25.0% of its value (more than 10.0%)"})
     zt = ZoneTransforms("per_zone", tuple(Transforms(3.0 + z, 0.9, t.kernel, 1.2, 40.0) for z in range(ZONES)))
-    write_transforms(tmp_path / "t.json", zt, [check] * ZONES, {"n_pairs": 1})
+    write_transforms(tmp_path / "t.json", zt, [check] * ZONES, geo.PAPER_TIME_AXIS, {"n_pairs": 1})
     assert read_transforms(tmp_path / "t.json") == zt
     assert read_fit_check(tmp_path / "t.json") == [check] * ZONES
     doc = json.loads((tmp_path / "t.json").read_text())

@@ -8,11 +8,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from denali_pipe.core.geometry import PAPER_TIME_AXIS
 from denali_pipe.report.render_benchmark import plot_render_benchmark
 from denali_pipe.twin.benchmark import SCENES_PER_OBJECT, benchmark_scenes, pareto_front, run_benchmark
 from denali_pipe.twin.layout import load_calibration, nominal_scene
 
 LOCATIONS = (0, 9, 27, 55, 72, 99)
+AXIS = PAPER_TIME_AXIS
 
 
 def test_pareto_front():
@@ -45,7 +47,7 @@ def test_small_benchmark_and_figure(catalogue, tmp_path):
         "mitransient": {"variant": "auto", "spp": 100, "max_depth": 3},
         "benchmark": {"n_scenes": 3, "reference_spp": 4000, "paper_spp": 40, "footprint_spp": [100, 1000]},
     }  # fmt: skip
-    summary, per_scene = run_benchmark(load_calibration(path), [catalogue["A"]], ["8inch"], settings, seed=1)
+    summary, per_scene = run_benchmark(load_calibration(path), [catalogue["A"]], ["8inch"], settings, AXIS, seed=1)
     assert list(summary.configuration) == ["paper", "paper, footprint pixels", "footprint 100", "footprint 1k", "analytic"]
     # the paper's block reads the centre zone only; every other configuration all 9 zones of 3 scenes
     assert len(per_scene) == 3 + 4 * 9 * 3 and per_scene.error_nl2.notna().all()

@@ -12,11 +12,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from denali_pipe.core.geometry import PAPER_TIME_AXIS, TimeAxis
 from denali_pipe.core.pulse import Pulse
 from denali_pipe.twin import calibrate as C
 from denali_pipe.twin.layout import ZoneGeometry, load_calibration, nominal_scene, zone_footprints
 
 LOCATIONS = list(range(0, 100, 7))
+AXIS = PAPER_TIME_AXIS  # the reference twin's bins: the fit's figures below are in them
 CROP, T, R = 60, 60, 3
 SETTINGS = {
     "wall_albedo": 1.0, "object_albedo": 0.5, "table": False, "table_albedo": 0.5,
@@ -54,7 +56,7 @@ def _plant(cal, catalogue, settings, tail):
     truth[18:27] = np.log(rng.uniform(0.9, 1.15, 9))
     truth[27:] = tail
     dummy = C.Captures(np.zeros((len(keys), R, 3, 3, T), np.float32), keys, CROP)
-    problem = C.Problem(C.Model(cal, specs, keys, settings), dummy, settings)
+    problem = C.Problem(C.Model(cal, specs, keys, settings, AXIS), dummy, settings)
     mean = problem.expected(truth, rng.uniform(0.5, 2, 9) * 1e3 / problem.twins(truth).max())
     real = mean[:, None] + rng.normal(0, 0.005 * mean.max(), (len(keys), R, 9, T))
     return truth, C.Captures(real.reshape(len(keys), R, 3, 3, T).astype(np.float32), keys, CROP), specs
@@ -69,7 +71,7 @@ def planted(cal, catalogue):
 @pytest.fixture(scope="module")
 def fitted(cal, planted):
     truth, captures, specs = planted
-    return C.calibrate(cal, specs, captures, SETTINGS, seed=0)
+    return C.calibrate(cal, specs, captures, SETTINGS, AXIS, seed=0)
 
 
 def test_planted_parameters_come_back(planted, fitted):
@@ -131,7 +133,7 @@ def test_held_out_residual_net_of_noise_in_noisy_zones(cal, planted):
     truth, captures, specs = planted
     keys = captures.keys
     rng = np.random.default_rng(5)
-    model = C.Model(cal, specs, keys, SETTINGS)
+    model = C.Model(cal, specs, keys, SETTINGS, AXIS)
     clean = C.Problem(model, captures, SETTINGS)
     gains = np.full(9, 1e3 / clean.twins(truth).max())
     mean = clean.expected(truth, gains)
@@ -156,7 +158,7 @@ def test_without_repeats_no_net_residual_is_claimed(cal, planted, fitted, tmp_pa
 
     truth, captures, specs = planted
     one = C.Captures(captures.real[:, :1], captures.keys, captures.crop_start)
-    problem = C.Problem(C.Model(cal, specs, one.keys, SETTINGS), one, SETTINGS)
+    problem = C.Problem(C.Model(cal, specs, one.keys, SETTINGS, AXIS), one, SETTINGS)
     got = C.zone_residuals(problem, truth, np.ones(9), np.random.default_rng(0))
     assert got["nl2_net"] is None and got["nl2_net_interval"] is None and np.shape(got["nl2"]) == (3, 3)
     result, _, held = fitted
@@ -178,13 +180,13 @@ def test_the_captures_floor_offsets_come_out_before_the_fit(cal, planted):
     real = captures.real + offsets[:, None, :, :, None].astype(np.float32)
     real[..., 0, 0, :2] = 0.0
     shifted = C.Captures(real, captures.keys, captures.crop_start)
-    problem = C.Problem(C.Model(cal, specs, captures.keys, SETTINGS), shifted, SETTINGS)
+    problem = C.Problem(C.Model(cal, specs, captures.keys, SETTINGS, AXIS), shifted, SETTINGS)
     problem.take_floor_offsets(truth)
     # zone by zone (a zone's mean offset over these few captures is within the noise of 0, so it stays: `common_offset`)
     got, want = problem.offsets.reshape(n, 9), offsets.reshape(n, 9)
     assert all(np.corrcoef(got[:, z], want[:, z])[0, 1] > 0.99 for z in range(9))
     assert (problem.y[:, 0, :2] == 0).all() and problem.kept[0, 0, :2].sum() == 0
-    clean = C.Problem(C.Model(cal, specs, captures.keys, SETTINGS), captures, SETTINGS)
+    clean = C.Problem(C.Model(cal, specs, captures.keys, SETTINGS, AXIS), captures, SETTINGS)
     y = clean.y.copy()
     clean.take_floor_offsets(truth)
     assert np.array_equal(clean.y, y) and not clean.offsets.any()
@@ -213,8 +215,11 @@ def test_file_round_trips_into_calibrated_twins(cal, catalogue, fitted, tmp_path
         assert (lo <= np.asarray(v) + 1e-12).all() and (np.asarray(v) <= hi + 1e-12).all(), k
     assert doc["not_identified"] == result.not_identified and doc["at_bound"] == result.at_bound
     # the calibrated twin: its 3x3 footprints are the fit's, a non-RR object stays Lambertian
-    tw = f.twin_scene(cal, _mesh(catalogue), SETTINGS, 3, catalogue["generalization1white"])
-    assert tw.material.kind == "lambertian" and tw.time_offset_opl > 0
+    tw = f.twin_scene(cal, _mesh(catalogue), SETTINGS, AXIS, 3, catalogue["generalization1white"])
+    assert tw.material.kind == "lambertian" and tw.time_offset_opl > 0 and tw.time_axis == AXIS
+    # the time offset is fitted in bins: on another axis it is as many of its bins
+    other = TimeAxis(bin_width_ps=93.0, zero_bin=16.0)
+    assert f.twin_scene(cal, _mesh(catalogue), SETTINGS, other, 3, catalogue["A"]).time_offset_opl == pytest.approx(f.time_offset * other.bin_width_opl)
     assert np.allclose(tw.relays[2].size, zone_footprints(cal, 3, ZoneGeometry(f.offsets, f.scales))[2].size)
     with pytest.raises(ValueError, match="not a twin calibration"):
         C.read_calibration(tmp_path / "missing.json")
@@ -364,7 +369,7 @@ def test_recovered_on_a_scene_the_twin_was_not_designed_on(catalogue, tmp_path):
         columns=["set", "object", "size", "location"],
     )
     dummy = C.Captures(np.zeros((len(keys), R, 3, 3, T), np.float32), keys, CROP)
-    problem = C.Problem(C.Model(cal, specs, keys, FLOOD), dummy, FLOOD)
+    problem = C.Problem(C.Model(cal, specs, keys, FLOOD, AXIS), dummy, FLOOD)
     truth = C.initial(FLOOD)
     truth[:18] = rng.uniform(-1.5, 1.5, 18)
     truth[18:27] = np.log(rng.uniform(0.9, 1.15, 9))
@@ -372,7 +377,7 @@ def test_recovered_on_a_scene_the_twin_was_not_designed_on(catalogue, tmp_path):
     m = problem.twins(truth)
     gains = rng.uniform(0.5, 2, 9) * 1e3 / m.max()
     captures = C.planted_captures(problem, truth, gains, 0.01 * float((gains[None, :, None] * m).max()), R, rng)
-    result, _, _ = C.calibrate(cal, specs, captures, FLOOD, seed=0)
+    result, _, _ = C.calibrate(cal, specs, captures, FLOOD, AXIS, seed=0)
     want, got = C.to_physical(truth, FLOOD), C.to_physical(result.x, FLOOD)
     for k in C.tail_names(FLOOD):
         se = float(np.asarray(result.se[k]))
@@ -394,7 +399,7 @@ def test_recovered_on_a_scene_the_twin_was_not_designed_on(catalogue, tmp_path):
     f = C.read_calibration(path)
     assert f.illumination == "flood" and f.emission.hwhm_deg == pytest.approx((got["beam_hwhm_h_deg"], got["beam_hwhm_v_deg"]))
     assert (f.emission.core_share, f.emission.core_hwhm_deg) == pytest.approx((got["core_share"], got["core_hwhm_deg"]))
-    tw = f.twin_scene(cal, _mesh(catalogue), {**FLOOD, "illumination": "spot"}, 3, catalogue["A"])  # the file's illumination, whatever the settings say
+    tw = f.twin_scene(cal, _mesh(catalogue), {**FLOOD, "illumination": "spot"}, AXIS, 3, catalogue["A"])  # the file's illumination, whatever the settings say
     assert tw.flood is not None and tw.flood.emission == f.emission
     assert tw.material.lobe_width_deg == SETTINGS["retroreflective"]["lobe_width_deg"]  # kept, unused
 

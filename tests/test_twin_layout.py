@@ -31,6 +31,7 @@ from denali_pipe.twin.layout import (
 )
 
 LOCATIONS = (0, 45, 99)
+AXIS = geo.PAPER_TIME_AXIS
 
 
 @pytest.fixture(scope="module")
@@ -153,11 +154,11 @@ def test_front_face_faces_the_wall(cal):
 def test_twin_scene_takes_settings(cal):
     mesh = object_mesh(load_catalogue(REPO / "config/objects.tsv")["circle"], "4inch")
     settings = {"footprint": {"film": 8, "scale": 1.0}, "wall_albedo": 0.9, "object_albedo": 0.4, "table": True, "table_albedo": 0.3}
-    tw = twin_scene(cal, mesh, settings)
+    tw = twin_scene(cal, mesh, settings, AXIS)
     assert tw.film == 8 and tw.object_albedo == 0.4 and len(tw.tables) == 2 and len(tw.relays) == 9
     assert tw.material == Material("lambertian", 0.4)  # no material set: the paper's
-    assert twin_scene(cal, mesh, settings, 8).film == 3 and len(twin_scene(cal, mesh, settings, 8).relays) == 64  # same pixel pitch
-    assert len(twin_scene(cal, mesh, {**settings, "table": False}).tables) == 0
+    assert twin_scene(cal, mesh, settings, AXIS, 8).film == 3 and len(twin_scene(cal, mesh, settings, AXIS, 8).relays) == 64  # same pixel pitch
+    assert len(twin_scene(cal, mesh, {**settings, "table": False}, AXIS).tables) == 0
 
 
 def _moved(cal, shift):

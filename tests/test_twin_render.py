@@ -19,6 +19,9 @@ from denali_pipe.twin.layout import Emission, Flood, Material, laser_spot, load_
 from denali_pipe.twin.render import read_twin, render_twin
 
 LOCATIONS = (0, 9, 55, 99)  # near/far from the wall, both ends of the gantry
+# The reference twin's bins, and a measured-like axis (docs/sensor.md): 93 ps, zero path at bin 16.
+AXIS = geo.PAPER_TIME_AXIS
+AXIS_93 = geo.TimeAxis(bin_width_ps=93.0, zero_bin=16.0)
 SETTINGS = {
     "renderer": "analytic",
     "wall_albedo": 1.0,
@@ -64,7 +67,7 @@ def test_every_catalogue_object_builds_a_scene(mi, cal, catalogue):
 
     for spec in catalogue.values():
         for size in spec.sizes:
-            twin = twin_scene(cal, object_mesh(spec, size), SETTINGS)
+            twin = twin_scene(cal, object_mesh(spec, size), SETTINGS, AXIS)
             scene = mi.load_dict(transient_scene(mi, twin, twin.relays[0], 3, "transient_nlos_path", LOCATIONS[0]))
             ids = sorted(s.id() for s in scene.shapes())
             assert ids == ["object", "relay", "spot"], (spec.name, size)
@@ -83,7 +86,7 @@ def test_mitransient_agrees_with_the_analytic_model_zone_by_zone(cal, catalogue,
     """Off-centre zones (the laser lands on the spot patch) and the centre
     one, a Lambertian object and the retroreflective BSDF plugin."""
     zones = tuple(zone_footprints(cal, 3)[z] for z in CORNER_CENTRE_EDGE)
-    twin = twin_scene(cal, object_mesh(catalogue[name], size), SETTINGS, relays=zones, film=8, material=material)
+    twin = twin_scene(cal, object_mesh(catalogue[name], size), SETTINGS, AXIS, relays=zones, film=8, material=material)
     mt, an = mitransient(twin, 4000), AnalyticRenderer(twin, 60)
     for location in (0, 99):
         m, a = mt.render(location), an.render(location)
@@ -103,8 +106,8 @@ def test_retroreflective_lobe_returns_toward_the_spot(cal, catalogue):
     centre zone (around the spot) gains on a corner zone against the Lambertian plate."""
     zones = tuple(zone_footprints(cal, 3)[z] for z in (0, 4))
     mesh = object_mesh(catalogue["square"], "8inch")
-    lam = AnalyticRenderer(twin_scene(cal, mesh, SETTINGS, relays=zones, film=4, material=Material("lambertian", 0.5)), 30).render(55)
-    rr = AnalyticRenderer(twin_scene(cal, mesh, SETTINGS, relays=zones, film=4, material=Material("retroreflective", 0.5, 5.0, 0.1)), 30).render(55)
+    lam = AnalyticRenderer(twin_scene(cal, mesh, SETTINGS, AXIS, relays=zones, film=4, material=Material("lambertian", 0.5)), 30).render(55)
+    rr = AnalyticRenderer(twin_scene(cal, mesh, SETTINGS, AXIS, relays=zones, film=4, material=Material("retroreflective", 0.5, 5.0, 0.1)), 30).render(55)
     ratio = lambda h: h[1].sum() / h[0].sum()  # noqa: E731
     assert ratio(rr) > 1.5 * ratio(lam)
 
@@ -131,7 +134,7 @@ def test_flood_is_the_sum_of_its_spots_for_a_lambertian_plate(cal, catalogue, lo
     in every zone: the first leg's spread, binned once per location
     (twin.analytic), leaves up to 11 % before the pulse at location 9, the
     plate nearest the wall."""
-    twin = twin_scene(cal, object_mesh(catalogue["A"], "8inch"), FLOOD, film=4, material=Material("lambertian", 0.5))
+    twin = twin_scene(cal, object_mesh(catalogue["A"], "8inch"), FLOOD, AXIS, film=4, material=Material("lambertian", 0.5))
     flood = AnalyticRenderer(twin, 20).render(location).mean(axis=(1, 2))
     spots = _sum_of_spots(twin, 20, location, *twin.flood.lit()).mean(axis=(1, 2))
     np.testing.assert_allclose(flood.sum(axis=1), spots.sum(axis=1), rtol=1e-9)
@@ -151,7 +154,9 @@ def test_flood_retroreflection_is_the_narrow_lobe_limit_of_its_spots(cal, catalo
     t_u, t_v = (np.arange(n_u) + 0.5) / n_u - 0.5, (np.arange(n_v) + 0.5) / n_v - 0.5
     points = (lit.centre + t_u[None, :, None] * lit.size[0] * lit.u + t_v[:, None, None] * lit.size[1] * lit.v).reshape(-1, 3)
     areas = np.full(len(points), lit.size[0] * lit.size[1] / len(points))
-    twin = twin_scene(cal, object_mesh(catalogue["square"], "8inch"), FLOOD, relays=(centre,), film=3, material=Material("retroreflective", 0.5, 2.0, 0.0))
+    twin = twin_scene(
+        cal, object_mesh(catalogue["square"], "8inch"), FLOOD, AXIS, relays=(centre,), film=3, material=Material("retroreflective", 0.5, 2.0, 0.0)
+    )
     lit_patch = Flood(Emission((26.0, 20.5)), points, areas, cal.sensor_position, cal.sensor_rotation, laser_spot(cal), cal.wall.normal)
     twin = dataclasses.replace(twin, flood=lit_patch)
     flood = AnalyticRenderer(twin, 12).render(55).mean(axis=(0, 1, 2))
@@ -169,8 +174,8 @@ def test_under_the_flood_every_zone_gets_its_own_retroreflected_return(cal, cata
     mesh = object_mesh(catalogue["square"], "8inch")
 
     def rr_over_lambertian(settings):
-        lam = AnalyticRenderer(twin_scene(cal, mesh, settings, relays=corner, film=4, material=Material("lambertian", 0.5)), 30).render(55)
-        rr = AnalyticRenderer(twin_scene(cal, mesh, settings, relays=corner, film=4, material=Material("retroreflective", 0.5, 5.0, 0.1)), 30).render(55)
+        lam = AnalyticRenderer(twin_scene(cal, mesh, settings, AXIS, relays=corner, film=4, material=Material("lambertian", 0.5)), 30).render(55)
+        rr = AnalyticRenderer(twin_scene(cal, mesh, settings, AXIS, relays=corner, film=4, material=Material("retroreflective", 0.5, 5.0, 0.1)), 30).render(55)
         return rr.sum() / lam.sum()
 
     assert rr_over_lambertian(SETTINGS) < 0.3
@@ -180,13 +185,13 @@ def test_under_the_flood_every_zone_gets_its_own_retroreflected_return(cal, cata
 def test_mitransient_refuses_the_flood(cal, catalogue):
     from denali_pipe.twin.mitransient import MitransientRenderer
 
-    twin = twin_scene(cal, object_mesh(catalogue["A"], "4inch"), FLOOD)
+    twin = twin_scene(cal, object_mesh(catalogue["A"], "4inch"), FLOOD, AXIS)
     with pytest.raises(ValueError, match="illumination: spot"):
         MitransientRenderer(twin, 16, 3, 1)
 
 
 def test_tent_filter_keeps_the_mass_and_the_mean_path(cal, catalogue):
-    twin = twin_scene(cal, object_mesh(catalogue["A"], "8inch"), SETTINGS)
+    twin = twin_scene(cal, object_mesh(catalogue["A"], "8inch"), SETTINGS, AXIS)
     box, tent = AnalyticRenderer(twin, 30, "box").render(55), AnalyticRenderer(twin, 30, "tent").render(55)
     b = np.arange(geo.N_BINS) + 0.5
     assert tent.sum() == pytest.approx(box.sum(), rel=1e-9)
@@ -194,12 +199,13 @@ def test_tent_filter_keeps_the_mass_and_the_mean_path(cal, catalogue):
     assert mean(tent) == pytest.approx(mean(box), abs=0.05)
 
 
-def test_arrival_bin_matches_the_geometric_path(cal, catalogue):
+@pytest.mark.parametrize("axis", [AXIS, AXIS_93], ids=["78ps", "93ps"])
+def test_arrival_bin_matches_the_geometric_path(cal, catalogue, axis):
     """The first non-empty bin is where the shortest laser -> spot -> object ->
-    footprint -> sensor path lands, for both renderers."""
-    twin = twin_scene(cal, object_mesh(catalogue["square"], "4inch"), SETTINGS)
+    footprint -> sensor path lands on the twin's time axis, for both renderers."""
+    twin = twin_scene(cal, object_mesh(catalogue["square"], "4inch"), SETTINGS, axis)
     pts, _ = front_samples(twin.mesh, 0.001)
-    twin = twin_scene(cal, twin.mesh, SETTINGS, relays=(zone_footprints(cal, 3)[4],))
+    twin = twin_scene(cal, twin.mesh, SETTINGS, axis, relays=(zone_footprints(cal, 3)[4],))
     x = pixel_centres(twin.relays[0], twin.film).reshape(-1, 3)
     for location in (0, 55):
         o = twin.poses[location].apply(pts)
@@ -207,7 +213,7 @@ def test_arrival_bin_matches_the_geometric_path(cal, catalogue):
             np.linalg.norm(twin.spot - twin.sensor) + np.linalg.norm(o - twin.spot, axis=1)[None, :]
             + np.linalg.norm(x[:, None] - o[None], axis=-1) + np.linalg.norm(x - twin.sensor, axis=1)[:, None]
         )  # fmt: skip
-        first, last = geo.opl_to_bin(opl.min()), geo.opl_to_bin(opl.max())
+        first, last = axis.opl_to_bin(opl.min()), axis.opl_to_bin(opl.max())
         for h in (mitransient(twin, 2000).render(location), AnalyticRenderer(twin, 60).render(location)):
             bins = np.flatnonzero(h.mean(axis=(0, 1, 2)) > 0)
             assert abs(bins[0] - np.floor(first)) <= 1 and abs(bins[-1] - np.floor(last)) <= 1, (location, bins[[0, -1]], first, last)
@@ -218,9 +224,9 @@ def test_table_scene_subtracts_the_table_and_keeps_the_object(cal, catalogue):
     unchanged (nothing occludes it): the table-safe sampling and the
     wall-and-table subtraction must give the analytic model back."""
     centre = (zone_footprints(cal, 3)[4],)
-    twin = twin_scene(cal, object_mesh(catalogue["square"], "8inch"), {**SETTINGS, "table": True}, relays=centre)
+    twin = twin_scene(cal, object_mesh(catalogue["square"], "8inch"), {**SETTINGS, "table": True}, AXIS, relays=centre)
     m = mitransient(twin, 8000).render(55).mean(axis=(0, 1, 2))
-    a = AnalyticRenderer(twin_scene(cal, twin.mesh, SETTINGS, relays=centre), 60).render(55).mean(axis=(0, 1, 2))
+    a = AnalyticRenderer(twin_scene(cal, twin.mesh, SETTINGS, AXIS, relays=centre), 60).render(55).mean(axis=(0, 1, 2))
     assert np.corrcoef(m, a)[0, 1] > 0.99
     assert m.sum() / a.sum() == pytest.approx(1.0, abs=0.03)
     # the object's share of the samples: ~1 % noise here, ~6 % with mitransient's area-proportional choice
@@ -228,7 +234,7 @@ def test_table_scene_subtracts_the_table_and_keeps_the_object(cal, catalogue):
 
 
 def test_analytic_refuses_a_table(cal, catalogue):
-    twin = twin_scene(cal, object_mesh(catalogue["square"], "8inch"), {**SETTINGS, "table": True})
+    twin = twin_scene(cal, object_mesh(catalogue["square"], "8inch"), {**SETTINGS, "table": True}, AXIS)
     with pytest.raises(ValueError, match="table"):
         AnalyticRenderer(twin, 60)
 
@@ -236,14 +242,14 @@ def test_analytic_refuses_a_table(cal, catalogue):
 def test_render_job_writes_the_twin_store(scene_json, catalogue, tmp_path):
     out = tmp_path / "circle_8inch.zarr"
     settings = {**SETTINGS, "footprint": {"film": 3, "scale": 1.0}, "analytic": {"samples": 30}}
-    render_twin(catalogue["circle"], "8inch", scene_json, {"seed": 7, "resolutions": ["3x3", "8x8"], "twin": settings}, out)
+    render_twin(catalogue["circle"], "8inch", scene_json, {"seed": 7, "resolutions": ["3x3", "8x8"], "twin": settings}, AXIS, out)
     t = read_twin(out)
     assert t.locations.tolist() == list(LOCATIONS)
     assert t.histograms["3x3"].shape == (len(LOCATIONS), 3, 3, geo.N_BINS) and t.histograms["3x3"].dtype == np.float32
     assert t.histograms["8x8"].shape == (len(LOCATIONS), 8, 8, geo.N_BINS)
     assert (t.histograms["3x3"].sum(axis=-1) > 0).all()
     assert t.attrs["renderer"] == "analytic" and t.attrs["object"]["name"] == "circle" and t.attrs["size"] == "8inch"
-    assert t.attrs["bin_width_opl"] == geo.BIN_WIDTH_OPL and t.attrs["start_opl"] == geo.HIST_START_OPL
+    assert t.attrs["bin_width_opl"] == AXIS.bin_width_opl and t.attrs["start_opl"] == AXIS.start_opl
     assert len(t.attrs["footprints"]["8x8"]) == 64 and t.attrs["calibration"] is None
     # nearer the wall and the footprint: an earlier return
     assert np.argmax(t.histogram(9)[1, 1]) < np.argmax(t.histogram(99)[1, 1])
@@ -258,7 +264,7 @@ def test_render_job_writes_the_twin_store(scene_json, catalogue, tmp_path):
 def test_a_flood_twin_store_says_how_it_was_lit(scene_json, catalogue, tmp_path):
     out = tmp_path / "circle_8inch.zarr"
     settings = {**FLOOD, "footprint": {"film": 2, "scale": 1.0}, "analytic": {"samples": 20}}
-    render_twin(catalogue["circle"], "8inch", scene_json, {"seed": 7, "resolutions": ["3x3"], "twin": settings}, out)
+    render_twin(catalogue["circle"], "8inch", scene_json, {"seed": 7, "resolutions": ["3x3"], "twin": settings}, AXIS, out)
     t = read_twin(out)
     assert t.attrs["illumination"] == "flood"
     assert t.attrs["emission"] == {"hwhm_deg": [26.0, 20.5], "core_share": 0.5, "core_hwhm_deg": 5.0}
@@ -282,6 +288,7 @@ def test_render_verb(scene_json, catalogue, tmp_path, caplog):
         "twin": {**SETTINGS, "renderer": "mitransient", "footprint": {"film": 2, "scale": 1.0}, "mitransient": {**SETTINGS["mitransient"], "spp": 200}},
     }
     args = ["twin", str(scene_json), "--object", json.dumps(catalogue["A"].to_dict()), "--size", "4inch", "--config", json.dumps(cfg), "--out", str(out)]
+    args += ["--time-axis", json.dumps({"bin_width_ps": AXIS.bin_width_ps, "zero_bin": AXIS.zero_bin})]
     assert main(args) == 0
     assert read_twin(out).attrs["renderer"] == "mitransient"
     args[args.index("--config") + 1] = json.dumps({"seed": 1})
@@ -298,7 +305,7 @@ def test_rgb_view_reproduces_the_calibrated_camera(mi, cal, catalogue):
     from denali_pipe.twin.scene import render_rgb, rgb_scene
 
     camera = cal.tracking_camera.scaled(0.5)
-    twin = twin_scene(cal, object_mesh(catalogue["A"], "8inch"), SETTINGS)
+    twin = twin_scene(cal, object_mesh(catalogue["A"], "8inch"), SETTINGS, AXIS)
     img = render_rgb(mi, rgb_scene(mi, cal, twin, 55, camera, 64), seed=3)
     assert img.shape == (camera.height, camera.width, 3) and img.dtype == np.uint8
     tags = {**cal.tags, geo.OBJECT_TAG_ID: cal.tag1_poses[55]}

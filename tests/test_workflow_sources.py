@@ -16,7 +16,7 @@ from conftest import ASSETS
 from workflow import TABLE5, copy_workflow, merged_config, reduced_configfiles, snakemake
 
 from denali_pipe.core.capture_sets import FOLDER_SUFFIX, PICKLE_SUFFIX, CaptureSet, expected_sets
-from denali_pipe.core.geometry import OBJECT_TAG_ID, select_locations
+from denali_pipe.core.geometry import OBJECT_TAG_ID, TimeAxis, select_locations
 from denali_pipe.core.objects import BACKGROUNDS, load_catalogue
 from denali_pipe.core.splits import SPLITS
 from denali_pipe.io.pickle_stream import CAMERA_RECORDS, iter_records
@@ -37,7 +37,7 @@ def write_streams(sets: list[CaptureSet], cfg: dict, raw, catalogue) -> None:
         groups.setdefault((s.object, s.size), []).append(s)
     for (obj, _), sets in groups.items():
         spec = None if obj in BACKGROUNDS else catalogue[obj]
-        synth_sets(sets, spec, cfg, [raw / f"{s.name}{PICKLE_SUFFIX}" for s in sets], "pickle")
+        synth_sets(sets, spec, cfg, TimeAxis.from_config(cfg["sensor"]["time_axis"]), [raw / f"{s.name}{PICKLE_SUFFIX}" for s in sets], "pickle")
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from denali_pipe.cli.common import json_arg, require_keys
+from denali_pipe.cli.common import add_time_axis, json_arg, require_keys
 
 log = logging.getLogger("denali")
 
@@ -52,7 +52,7 @@ def cmd_transforms(args: argparse.Namespace) -> None:
         "seconds": t2 - t0,
         "bootstrap_seconds": t2 - t1,
     }
-    write_transforms(Path(args.out), zt, checks, record)
+    write_transforms(Path(args.out), zt, checks, args.time_axis, record)
     log.info(
         "wrote %s: mode %s (held-out residual %s), centre zone %s, identifiable %s (%.1f s, of which the bootstrap %.1f s)",
         args.out,
@@ -70,5 +70,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--features", nargs="+", required=True, help="3x3 light-on feature stores (results/features/<set>.zarr)")
     s.add_argument("--twins", nargs="+", required=True, help="their objects' twin stores (results/twin/<object>_<size>.zarr)")
     s.add_argument("--config", type=json_arg, required=True, help='JSON {"seed": ..., "fit": {...}}')
+    add_time_axis(s)
     s.add_argument("--out", required=True, help="output results/transforms.json")
     s.set_defaults(func=cmd_transforms)

@@ -6,13 +6,14 @@ import argparse
 import logging
 from pathlib import Path
 
+from denali_pipe.cli.common import add_time_axis
+
 log = logging.getLogger("denali")
 
 
 def cmd_crop_window(args: argparse.Namespace) -> None:
     import json
 
-    from denali_pipe.core import geometry as geo
     from denali_pipe.core.atomic import atomic_file
     from denali_pipe.core.objects import SIZES
     from denali_pipe.io.store import open_set
@@ -21,7 +22,7 @@ def cmd_crop_window(args: argparse.Namespace) -> None:
 
     stores = [open_set(Path(p)) for p in args.backgrounds]
     n = stores[0].histograms.shape[2]
-    lead = three_bounce_lead(load_calibration(Path(args.scene)), n, max(SIZES.values())) / geo.BIN_WIDTH_OPL
+    lead = three_bounce_lead(load_calibration(Path(args.scene)), n, max(SIZES.values())) / args.time_axis.bin_width_opl
     window = crop_window([s.histograms[...] for s in stores], lead)
     record = {
         **window.to_dict(),
@@ -67,6 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("crop-window", help="first histogram bin after the direct return, from background sets")
     s.add_argument("backgrounds", nargs="+", help="NOOBJECT stores of one resolution")
     s.add_argument("--scene", required=True, help="results/calibration/scene.json: where the objects can be")
+    add_time_axis(s)
     s.add_argument("--out", required=True, help="output crop_<res>.json")
     s.set_defaults(func=cmd_crop_window)
     s = sub.add_parser("preprocess", help="align, subtract the background and crop one capture set")

@@ -6,7 +6,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from denali_pipe.cli.common import json_arg, require_keys
+from denali_pipe.cli.common import add_time_axis, json_arg, require_keys
 
 log = logging.getLogger("denali")
 
@@ -26,7 +26,7 @@ def cmd_rig(args: argparse.Namespace) -> None:
     for cs in sets:
         if (spec is None) != cs.is_background or (spec is not None and spec.name != cs.object):
             raise ValueError(f"capture set {cs.name}: the object record {args.object} does not match the set's object")
-    synth_sets(sets, spec, args.config, outs, args.format)
+    synth_sets(sets, spec, args.config, args.time_axis, outs, args.format)
     log.info("wrote %s", " ".join(args.outs))
 
 
@@ -35,7 +35,7 @@ def cmd_rig_examples(args: argparse.Namespace) -> None:
 
     if len(args.sets) != len(args.backgrounds):
         raise ValueError(f"rig-examples: {len(args.sets)} sets but {len(args.backgrounds)} backgrounds")
-    rig_examples(list(zip(map(Path, args.sets), map(Path, args.backgrounds))), Path(args.out))
+    rig_examples(list(zip(map(Path, args.sets), map(Path, args.backgrounds))), args.time_axis, Path(args.out))
     log.info("wrote %s", args.out)
 
 
@@ -54,11 +54,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("outs", nargs="+", help="<set>_NLOSdata folders, or <set>_short_NLOSdata.pkl with --format pickle")
     s.add_argument("--object", type=json_arg, default=None, help="the object's sheet row as JSON (omit for backgrounds)")
     s.add_argument("--config", type=json_arg, required=True, help='JSON {"seed": ..., "rig": {...}}')
+    add_time_axis(s)
     s.add_argument("--format", choices=["release", "pickle"], default="release", help="release folders or raw pickle streams")
     s.set_defaults(func=cmd_rig)
     s = sub.add_parser("rig-examples", help="plot example histograms with the three-bounce bump marked")
     s.add_argument("--sets", nargs="+", required=True, help="object capture-set stores (<set>.zarr)")
     s.add_argument("--backgrounds", nargs="+", required=True, help="the matching NOOBJECT set stores, in the same order")
+    add_time_axis(s)
     s.add_argument("--out", required=True, help="PNG path; the plotted data goes beside it as CSV")
     s.set_defaults(func=cmd_rig_examples)
     s = sub.add_parser("rig-vs-real", help="measure raw centre-zone histograms against the real captures' figures")

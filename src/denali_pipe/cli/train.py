@@ -6,7 +6,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from denali_pipe.cli.common import json_arg
+from denali_pipe.cli.common import add_time_axis, json_arg
 from denali_pipe.train.cells import PRECISIONS
 
 log = logging.getLogger("denali")
@@ -28,7 +28,7 @@ def cmd_train(args: argparse.Namespace) -> None:
     cell = Cell(**args.cell)
     x, samples, _ = read_dataset(Path(args.dataset), Path(args.table))
     try:
-        x, samples = condition_view(x, samples, cell.task, cell.condition)
+        x, samples = condition_view(x, samples, cell.task, cell.condition, args.time_axis)
     except ValueError as e:
         raise ValueError(f"{args.table}: {e}") from None
     if cell.model == LINEAR:
@@ -90,5 +90,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the networks' training dtype (config train.precision; auto: bfloat16 on a CPU that multiplies it natively, where its check passes)",
     )
     s.add_argument("--budget-seconds", type=float, default=None, help="stop a network's training after this much training time")
+    add_time_axis(s, needed_by="a jitter condition's blur (FWHM in ps)")
     s.add_argument("--outdir", required=True, help="output run folder: metrics.json, curves.csv, model.pt")
     s.set_defaults(func=cmd_train)

@@ -6,7 +6,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from denali_pipe.cli.common import json_arg, require_keys
+from denali_pipe.cli.common import add_time_axis, json_arg, require_keys
 
 log = logging.getLogger("denali")
 
@@ -17,7 +17,7 @@ def cmd_twin(args: argparse.Namespace) -> None:
 
     require_keys(args.config, {"seed", "resolutions", "twin"})
     calibration = Path(args.calibration) if args.calibration else None
-    render_twin(spec_from_dict(args.object), args.size, Path(args.scene), args.config, Path(args.out), calibration)
+    render_twin(spec_from_dict(args.object), args.size, Path(args.scene), args.config, args.time_axis, Path(args.out), calibration)
     log.info("wrote %s", args.out)
 
 
@@ -37,7 +37,7 @@ def cmd_twin_calibration(args: argparse.Namespace) -> None:
     train = Captures(real, keys, crop).subset(split.train)
     specs = {d["name"]: spec_from_dict(d) for d in args.objects}
     settings = args.config["twin"]
-    result, problem, held = calibrate(load_calibration(Path(args.scene)), specs, train, settings, args.config["seed"])
+    result, problem, held = calibrate(load_calibration(Path(args.scene)), specs, train, settings, args.time_axis, args.config["seed"])
     record = {
         "n_captures": len(problem.y),
         "n_validation": len(held.y),
@@ -71,7 +71,7 @@ def cmd_render_benchmark(args: argparse.Namespace) -> None:
 
     require_keys(args.config, {"seed", "sizes", "twin"})
     specs = [spec_from_dict(d) for d in args.objects]
-    summary, _ = run_benchmark(load_calibration(Path(args.scene)), specs, args.config["sizes"], args.config["twin"], args.config["seed"])
+    summary, _ = run_benchmark(load_calibration(Path(args.scene)), specs, args.config["sizes"], args.config["twin"], args.time_axis, args.config["seed"])
     plot_render_benchmark(summary, Path(args.out))
     log.info("wrote %s and its CSV:\n%s", args.out, summary.to_string(index=False))
 
@@ -85,7 +85,7 @@ def cmd_fig18(args: argparse.Namespace) -> None:
         raise ValueError(f"fig18: {len(args.sets)} sets, {len(args.backgrounds)} backgrounds and {len(args.twins)} twins; expected one of each per row")
     captures = [(Path(a), Path(b), Path(c)) for a, b, c in zip(args.sets, args.backgrounds, args.twins)]
     crop = json.loads(Path(args.crop).read_text())["crop_start"]
-    fig18(captures, Path(args.scene), Path(args.calibration), crop, args.config, Path(args.out))
+    fig18(captures, Path(args.scene), Path(args.calibration), crop, args.config, args.time_axis, Path(args.out))
     log.info("wrote %s", args.out)
 
 
@@ -96,6 +96,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--size", required=True, choices=["4inch", "8inch"], help="object size")
     s.add_argument("--config", type=json_arg, required=True, help='JSON {"seed": ..., "twin": {...}}')
     s.add_argument("--calibration", help="results/twin_calibration.json: render the calibrated twin (footprints, time offset, lobe)")
+    add_time_axis(s)
     s.add_argument("--out", required=True, help="output results/twin/<object>_<size>.zarr")
     s.set_defaults(func=cmd_twin)
 
@@ -104,6 +105,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--features", nargs="+", required=True, help="3x3 light-on feature stores (results/features/<set>.zarr)")
     s.add_argument("--objects", type=json_arg, required=True, help="JSON list of the objects' sheet rows")
     s.add_argument("--config", type=json_arg, required=True, help='JSON {"seed": ..., "fit": {"test_fraction": ...}, "twin": {...}}')
+    add_time_axis(s)
     s.add_argument("--out", required=True, help="output results/twin_calibration.json")
     s.add_argument("--png", required=True, help="the figure of real against twin per zone, before and after (CSV beside it)")
     s.set_defaults(func=cmd_twin_calibration)
@@ -111,6 +113,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("scene", help="results/calibration/scene.json")
     s.add_argument("--objects", type=json_arg, required=True, help="JSON list of the objects' sheet rows to draw scenes from")
     s.add_argument("--config", type=json_arg, required=True, help='JSON {"seed": ..., "sizes": [...], "twin": {...}}')
+    add_time_axis(s)
     s.add_argument("--out", required=True, help="PNG path; the table goes beside it as CSV")
     s.set_defaults(func=cmd_render_benchmark)
     s = sub.add_parser("fig18", help="Fig 18: tracking frames, twin renders and real vs calibrated twin histograms of every zone")
@@ -121,5 +124,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--calibration", required=True, help="results/twin_calibration.json: the zones' gains and the pulse")
     s.add_argument("--crop", required=True, help="results/features/crop_3x3.json: the features' first kept bin")
     s.add_argument("--config", type=json_arg, required=True, help='JSON {"seed": ..., "variant": ..., "fig18": {...}}')
+    add_time_axis(s)
     s.add_argument("--out", required=True, help="PNG path; the plotted data goes beside it as CSV")
     s.set_defaults(func=cmd_fig18)

@@ -13,9 +13,9 @@ Conventions
   top-right, bottom-right, bottom-left (OpenCV's ArUco order).
 - Cameras follow OpenCV: x right, y down, z forward; ``R_wc``/``t_wc`` map
   world points into the camera frame.
-- Histogram bins are sensor-relative optical path length (OPL, metres):
-  bin b covers [HIST_START_OPL + b w, HIST_START_OPL + (b + 1) w) with
-  w = BIN_WIDTH_OPL.
+- Histogram bins are sensor-relative optical path length (OPL, metres) on
+  a `TimeAxis`: bin b covers [(b - 0.5 - zero_bin) w, (b + 0.5 - zero_bin) w)
+  with w its width in metres of optical path.
 """
 
 from __future__ import annotations
@@ -28,15 +28,44 @@ import numpy as np
 # --- time axis -----------------------------------------------------------------
 
 N_BINS = 128
-BIN_WIDTH_OPL = 3.0 / 128  # m of optical path per bin (78 ps)
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
-BIN_WIDTH_PS = BIN_WIDTH_OPL / SPEED_OF_LIGHT * 1e12  # a bin's time, ps (78.2)
-HIST_START_OPL = 0.0  # sensor-relative OPL at the left edge of bin 0, m
 
 
-def opl_to_bin(opl: np.ndarray | float) -> np.ndarray | float:
-    """Fractional bin index of a sensor-relative optical path length (m)."""
-    return (np.asarray(opl) - HIST_START_OPL) / BIN_WIDTH_OPL
+@dataclass(frozen=True)
+class TimeAxis:
+    """The histograms' time axis: bin_width_ps, a bin's time (ps);
+    zero_bin, where a return from zero optical path peaks, in bins with bin b
+    centred at b. Bin b covers OPL [(b - 0.5 - zero_bin) w, (b + 0.5 - zero_bin) w),
+    w = `bin_width_opl`. Config `sensor.time_axis` sets it (`from_config`)."""
+
+    bin_width_ps: float
+    zero_bin: float
+
+    @classmethod
+    def from_config(cls, d: dict) -> "TimeAxis":
+        """The axis of a config `sensor.time_axis` block."""
+        return cls(float(d["bin_width_ps"]), float(d["zero_bin"]))
+
+    @property
+    def bin_width_opl(self) -> float:
+        """A bin's width in metres of optical path."""
+        # divided, then multiplied: the paper's 3/128 m comes back exactly from its ps
+        return self.bin_width_ps / 1e12 * SPEED_OF_LIGHT
+
+    @property
+    def start_opl(self) -> float:
+        """Sensor-relative OPL at the left edge of bin 0, m: -(zero_bin + 0.5) w."""
+        return (-0.5 - self.zero_bin) * self.bin_width_opl  # +0.0, not -0.0, for the paper's axis
+
+    def opl_to_bin(self, opl: np.ndarray | float) -> np.ndarray | float:
+        """Fractional bin index of a sensor-relative optical path length (m):
+        bin b covers [b, b + 1)."""
+        return (np.asarray(opl) - self.start_opl) / self.bin_width_opl
+
+
+# The reference twin's axis: 3/128 m of optical path a bin (78.2 ps), OPL 0 at
+# the left edge of bin 0.
+PAPER_TIME_AXIS = TimeAxis(bin_width_ps=3.0 / 128 / SPEED_OF_LIGHT * 1e12, zero_bin=-0.5)
 
 
 # --- rotations and poses ---------------------------------------------------------

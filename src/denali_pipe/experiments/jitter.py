@@ -9,16 +9,17 @@ from __future__ import annotations
 
 import pandas as pd
 
-from denali_pipe.core.geometry import BIN_WIDTH_PS
+from denali_pipe.core.geometry import TimeAxis
 from denali_pipe.train.jitter import jitter_fwhm
 from denali_pipe.train.runs import METRICS, seed_stats
 
 
-def jitter_curve(runs: pd.DataFrame) -> pd.DataFrame:
+def jitter_curve(runs: pd.DataFrame, axis: TimeAxis) -> pd.DataFrame:
     """The sweep's table from `train.runs.load_runs` rows of jitter cells:
     one row per task, metric (the paper's table metrics) and FWHM, with
-    fwhm_bins, the mean and std over seeds, n_seeds and the trivial
-    predictor's mean (training mean position or majority class)."""
+    fwhm_bins (in bins of `axis`, the captures' time axis), the mean and
+    std over seeds, n_seeds and the trivial predictor's mean (training mean
+    position or majority class)."""
     fwhm = runs["condition"].map(jitter_fwhm)
     if fwhm.isna().any():
         raise ValueError(f"not jitter cells: conditions {sorted(set(runs['condition'][fwhm.isna()]))}")
@@ -34,7 +35,7 @@ def jitter_curve(runs: pd.DataFrame) -> pd.DataFrame:
             r = r._asdict()
             rows.append(
                 {
-                    "task": task, "metric": name, "fwhm_ps": r["fwhm_ps"], "fwhm_bins": r["fwhm_ps"] / BIN_WIDTH_PS,
+                    "task": task, "metric": name, "fwhm_ps": r["fwhm_ps"], "fwhm_bins": r["fwhm_ps"] / axis.bin_width_ps,
                     "mean": r[cols[0]], "std": r[f"{cols[0]}_std"], "n_seeds": r["n_seeds"], "trivial": r[cols[1]],
                 }
             )  # fmt: skip

@@ -310,7 +310,7 @@ def frame_panel(inv: Inventory, sel: Selection, outputs: Outputs, template: str)
     return figs.frame_figure(rgb, truth_uv, predicted_uv, figs.title(f"Tracking frame, location {sel.location}", detail), template)
 
 
-def histograms_panel(inv: Inventory, sel: Selection, log_y: bool, template: str):
+def histograms_panel(inv: Inventory, sel: Selection, log_y: bool, axis: geo.TimeAxis, template: str):
     counts = cap.raw_histograms(cap.capture_store(inv, sel.cs), sel.location)[sel.repeat]
     bg_set, background = background_of(sel.cs), None
     if inv.has_set(bg_set):
@@ -321,9 +321,8 @@ def histograms_panel(inv: Inventory, sel: Selection, log_y: bool, template: str)
     n = sel.cs.n_zones
     detail = f"dotted: {bg_set.name}'s mean" if background is not None else f"no background: {target(store_path(bg_set.name))}"
     detail += "; dashed: each zone's first kept bin" if window is not None else f"; no crop window: {target(crop_path(sel.cs.resolution))}"
-    return figs.histogram_grid(
-        counts, background, None if window is None else window.zone_starts, log_y, figs.title(f"Raw {n}x{n} histograms, repeat {sel.repeat}", detail), template
-    )
+    zone_starts = None if window is None else window.zone_starts
+    return figs.histogram_grid(counts, background, zone_starts, log_y, axis, figs.title(f"Raw {n}x{n} histograms, repeat {sel.repeat}", detail), template)
 
 
 # The twin's lobe and footprints are calibrated on the benchmark's (retroreflective)
@@ -331,7 +330,7 @@ def histograms_panel(inv: Inventory, sel: Selection, log_y: bool, template: str)
 TWIN_NOTE = "dashed: the calibrated twin after the centre zone's scale and blur fitted on the benchmark's objects"
 
 
-def centre_panel(inv: Inventory, sel: Selection, template: str):
+def centre_panel(inv: Inventory, sel: Selection, axis: geo.TimeAxis, template: str):
     if sel.cs.is_background:
         return figs.message_figure("a background set: no background-subtracted features", template)
     if sel.cs.name not in inv.features:
@@ -356,7 +355,7 @@ def centre_panel(inv: Inventory, sel: Selection, template: str):
         else:
             twin = cap.twin_histogram(inv, sel.cs.object, sel.cs.size, sel.location)[first_bin : first_bin + feats.shape[-1]]
     repeats = np.stack([feats[:, r, c] for r, c in zones], axis=1)
-    return figs.centre_figure(first_bin, repeats, sel.repeat, twin, [f"zone ({r},{c})" for r, c in zones], figs.title(main, detail), template)
+    return figs.centre_figure(first_bin, repeats, sel.repeat, twin, [f"zone ({r},{c})" for r, c in zones], axis, figs.title(main, detail), template)
 
 
 def bars_panel(task: str, outputs: Outputs, truth: str | None, template: str):
@@ -416,8 +415,9 @@ def messages(items: list[Missing]) -> list:
 # --- the app ----------------------------------------------------------------------------------
 
 
-def build_app(root: Path) -> Dash:
-    """The explorer over `root` (a results folder, which may be empty or absent)."""
+def build_app(root: Path, axis: geo.TimeAxis) -> Dash:
+    """The explorer over `root` (a results folder, which may be empty or
+    absent), its captures on `axis`."""
     root = Path(root)
     app = Dash(__name__, title="DENALI explorer")
     app.layout = lambda: layout(root)
@@ -522,8 +522,8 @@ def build_app(root: Path) -> Dash:
             notes.append(Missing(f"no capture index for {sel.cs.name} (its shape class)", target(index_path(sel.cs.name))))
         panels = [
             _safe(lambda: frame_panel(inv, sel, outputs, template), template),
-            _safe(lambda: histograms_panel(inv, sel, yscale == "log", template), template),
-            _safe(lambda: centre_panel(inv, sel, template), template),
+            _safe(lambda: histograms_panel(inv, sel, yscale == "log", axis, template), template),
+            _safe(lambda: centre_panel(inv, sel, axis, template), template),
             _safe(lambda: bars_panel("shape", outputs, shape_truth, template), template),
             _safe(lambda: bars_panel("size", outputs, sel.cs.size, template), template),
             _safe(lambda: grid_panel(inv, sel, choice, heat, outputs, template), template),
@@ -533,7 +533,7 @@ def build_app(root: Path) -> Dash:
     return app
 
 
-def serve(root: Path, host: str, port: int) -> None:
-    """Serve the explorer until interrupted."""
+def serve(root: Path, axis: geo.TimeAxis, host: str, port: int) -> None:
+    """Serve the explorer over `root` (captures on `axis`) until interrupted."""
     log.info("explorer on http://%s:%d over %s", host, port, Path(root).resolve())
-    build_app(root).run(host=host, port=port, debug=False)
+    build_app(root, axis).run(host=host, port=port, debug=False)

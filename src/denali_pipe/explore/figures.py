@@ -19,10 +19,13 @@ import plotly.io as pio
 from denali_pipe.core import geometry as geo
 
 TRUTH, PREDICTED, MEASURED, BACKGROUND, TWIN, OTHER = "#1a9850", "#d73027", "#2166ac", "#878787", "#e08214", "#92c5de"
-BIN_PS = geo.BIN_WIDTH_OPL / 299_792_458.0 * 1e12  # one histogram bin, picoseconds
-BIN_AXIS = f"time bin ({BIN_PS:.0f} ps)"
 FRAME_JPEG_QUALITY = 90  # the frame travels as a JPEG: a fifth of a PNG's bytes, no visible loss at 640x360
 MARGIN = dict(l=55, r=15, t=62, b=45)
+
+
+def bin_title(axis: geo.TimeAxis) -> str:
+    """A time-bin axis's title: the bin's time on `axis`."""
+    return f"time bin ({axis.bin_width_ps:.0f} ps)"
 
 
 def title(main: str, detail: str = "") -> dict:
@@ -68,10 +71,13 @@ def _template(name: str) -> dict:
     return pio.templates[name].to_plotly_json()
 
 
-def histogram_grid(counts: np.ndarray, background: np.ndarray | None, zone_starts: np.ndarray | None, log_y: bool, heading: dict, template: str) -> dict:
+def histogram_grid(
+    counts: np.ndarray, background: np.ndarray | None, zone_starts: np.ndarray | None, log_y: bool, axis: geo.TimeAxis, heading: dict, template: str
+) -> dict:
     """The n x n raw histograms (n, n, B) counts of one repeat, the
     background set's mean (n, n, B) overlaid and each zone's first kept bin
-    (zone_starts (n, n)) marked; zone (0, 0) top left, as the sensor's grid.
+    (zone_starts (n, n)) marked; zone (0, 0) top left, as the sensor's grid;
+    bins of `axis`.
 
     A plain figure dict, its axes laid out here: through plotly's figure
     objects (make_subplots and its updates) an 8x8 grid took 0.3-0.6 s to build."""
@@ -110,16 +116,18 @@ def histogram_grid(counts: np.ndarray, background: np.ndarray | None, zone_start
             if zone_starts is not None:
                 start = int(zone_starts[r, c])
                 shapes.append(dict(type="line", xref=f"x{k}", yref=f"y{k} domain", x0=start, x1=start, y0=0, y1=1, line=dict(color=TWIN, width=1, dash="dash")))
-    layout[f"xaxis{_suffix((n - 1) * n + (n + 1) // 2)}"]["title"] = dict(text=BIN_AXIS)  # the bottom row's middle subplot
+    layout[f"xaxis{_suffix((n - 1) * n + (n + 1) // 2)}"]["title"] = dict(text=bin_title(axis))  # the bottom row's middle subplot
     layout[f"yaxis{_suffix(((n + 1) // 2 - 1) * n + 1)}"]["title"] = dict(text=f"counts{' (log)' if log_y else ''}")  # the left column's middle one
     layout["shapes"] = shapes
     return dict(data=data, layout=layout)
 
 
-def centre_figure(first_bin: int, repeats: np.ndarray, chosen: int, twin: np.ndarray | None, names: list[str], heading: dict, template: str) -> go.Figure:
+def centre_figure(
+    first_bin: int, repeats: np.ndarray, chosen: int, twin: np.ndarray | None, names: list[str], axis: geo.TimeAxis, heading: dict, template: str
+) -> go.Figure:
     """Background-subtracted cropped counts: repeats (R, K, T) of K zones
     named `names` (the chosen repeat bold, the others faint) from bin
-    `first_bin`, and the twin's expected counts (T,) of the same bins."""
+    `first_bin` of `axis`, and the twin's expected counts (T,) of the same bins."""
     t = first_bin + np.arange(repeats.shape[-1])
     fig = go.Figure()
     for k, name in enumerate(names):
@@ -136,7 +144,7 @@ def centre_figure(first_bin: int, repeats: np.ndarray, chosen: int, twin: np.nda
         template=template,
         title=heading,
         margin=MARGIN,
-        xaxis_title=BIN_AXIS,
+        xaxis_title=bin_title(axis),
         yaxis_title="counts above background",
         legend=dict(orientation="h", y=-0.2, yanchor="top"),
     )

@@ -49,25 +49,27 @@ def real_histograms(store: CaptureStore, background: CaptureStore, location: int
     return subtract_background(h, bg)[0].mean(axis=0)
 
 
-def twin_view(mi, cal: Calibration, twin: Twin, location: int, frame_shape: tuple[int, int], spp: int, seed: int) -> np.ndarray:
-    """(H, W, 3) uint8 RGB render of the tracking camera's view at `location`."""
+def twin_view(mi, cal: Calibration, twin: Twin, axis: geo.TimeAxis, location: int, frame_shape: tuple[int, int], spp: int, seed: int) -> np.ndarray:
+    """(H, W, 3) uint8 RGB render of the tracking camera's view at `location`
+    (`axis`: the time axis a twin scene holds; the view draws no histogram)."""
     from denali_pipe.twin.scene import render_rgb, rgb_scene
 
     spec = spec_from_dict(twin.attrs["object"])
     scene = twin_scene(
-        cal, object_mesh(spec, twin.attrs["size"]), twin.attrs["config"], material=material_of(twin.attrs["config"], spec.material == "retroreflective")
+        cal, object_mesh(spec, twin.attrs["size"]), twin.attrs["config"], axis, material=material_of(twin.attrs["config"], spec.material == "retroreflective")
     )
     h, w = frame_shape
     camera = dataclasses.replace(cal.tracking_camera, intrinsics=cal.tracking_camera.intrinsics.scaled_to(w, h))
     return render_rgb(mi, rgb_scene(mi, cal, scene, location, camera, spp), seed)
 
 
-def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, calibration: Path, crop: int, config: dict, out_png: Path) -> None:
+def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, calibration: Path, crop: int, config: dict, axis: geo.TimeAxis, out_png: Path) -> None:
     """captures: (set store, its NOOBJECT store, the object's calibrated twin
     store) per row; calibration: twin_calibration.json (the zones' gains and
     the pulse); crop: the features' first kept bin (results/features/crop_3x3.json).
-    config: {"seed": int, "fig18": {"rgb_spp": int}, "variant": str}.
-    The location of each row is drawn from the locations all three share."""
+    config: {"seed": int, "fig18": {"rgb_spp": int}, "variant": str};
+    axis: the captures' time axis. The location of each row is drawn from
+    the locations all three share."""
     from denali_pipe.twin.variant import load_mitsuba
 
     mi = load_mitsuba(config["variant"])
@@ -87,7 +89,7 @@ def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, calibration
         sim = fitted.gains[..., None] * pulse.convolve(twin.histogram(location, "3x3").astype(np.float64), kernel)
         frame = store.frame("tracking_rgb", store.index_of(location))[..., ::-1]  # BGR -> RGB
         view = twin_view(
-            mi, cal, twin, location, frame.shape[:2], config["fig18"]["rgb_spp"], derive_seed(config["seed"], "fig18", store.name, location) % 2**32
+            mi, cal, twin, axis, location, frame.shape[:2], config["fig18"]["rgb_spp"], derive_seed(config["seed"], "fig18", store.name, location) % 2**32
         )
         left, right = sub.subfigures(1, 2, width_ratios=[1.3, 1])
         img_axes = left.subplots(1, 2)

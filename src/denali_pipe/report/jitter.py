@@ -8,16 +8,17 @@ from pathlib import Path
 import pandas as pd
 
 from denali_pipe.core.figure import plt, save_figure
-from denali_pipe.core.geometry import BIN_WIDTH_PS
+from denali_pipe.core.geometry import TimeAxis
 
 TASK_TITLES = {"location": "location (lower is better)", "shape": "shape (higher is better)", "size": "size (higher is better)"}
 Y_LABELS = {"location": "test error (m)", "shape": "test score", "size": "test score"}
 COLOURS = ("tab:blue", "tab:orange", "tab:green")
 
 
-def plot_jitter(curve: pd.DataFrame, title: str, png: Path) -> None:
-    """`experiments.jitter.jitter_curve`'s table as one panel per task; the
-    table goes beside the PNG as CSV."""
+def plot_jitter(curve: pd.DataFrame, title: str, axis: TimeAxis, png: Path) -> None:
+    """`experiments.jitter.jitter_curve`'s table as one panel per task, FWHM
+    also in bins of `axis` (the captures' time axis); the table goes beside
+    the PNG as CSV."""
     tasks = [t for t in TASK_TITLES if t in set(curve["task"])]
     fig, axes = plt.subplots(1, len(tasks), figsize=(4.2 * len(tasks), 4.3), squeeze=False)
     for ax, task in zip(axes[0], tasks):
@@ -33,8 +34,8 @@ def plot_jitter(curve: pd.DataFrame, title: str, png: Path) -> None:
         ax.set_ylabel(Y_LABELS[task])
         if task != "location":
             ax.set_ylim(0, 1)  # scores: their whole range
-        top = ax.secondary_xaxis("top", functions=(lambda ps: ps / BIN_WIDTH_PS, lambda b: b * BIN_WIDTH_PS))
-        top.set_xlabel(f"FWHM (bins of {BIN_WIDTH_PS:.0f} ps)", fontsize=8)
+        top = ax.secondary_xaxis("top", functions=(lambda ps: ps / axis.bin_width_ps, lambda b: b * axis.bin_width_ps))
+        top.set_xlabel(f"FWHM (bins of {axis.bin_width_ps:.0f} ps)", fontsize=8)
         ax.grid(alpha=0.3)
         # below the panel, where no curve runs
         ax.legend(fontsize=7, title="dashed: trivial predictor", title_fontsize=7, ncol=2, loc="upper center", bbox_to_anchor=(0.5, -0.3))

@@ -71,10 +71,10 @@ def _camera_record(cam: geo.Camera) -> dict:
     return {**cam.intrinsics.to_dict(), "R_world_to_camera": cam.R_wc.tolist(), "t_world_to_camera": cam.t_wc.tolist()}
 
 
-def metadata_record(cs: CaptureSet, locations: np.ndarray, rig_cfg: dict) -> dict:
+def metadata_record(cs: CaptureSet, locations: np.ndarray, rig_cfg: dict, axis: geo.TimeAxis) -> dict:
     """The capture's metadata record (the fields the real capture script writes,
-    plus the firmware and camera settings). No wall-clock time, so reruns are
-    byte-identical."""
+    plus the firmware and camera settings and the bins' width on `axis`). No
+    wall-clock time, so reruns are byte-identical."""
     fw = geo.FIRMWARE[cs.resolution]
     return {
         "object": cs.object,
@@ -86,7 +86,7 @@ def metadata_record(cs: CaptureSet, locations: np.ndarray, rig_cfg: dict) -> dic
         "grid": list(geo.GRID_SHAPE),
         "locations": [int(k) for k in locations],
         "n_bins": geo.N_BINS,
-        "bin_width_opl_m": geo.BIN_WIDTH_OPL,
+        "bin_width_opl_m": axis.bin_width_opl,
         "spad_map": fw.spad_map,
         "period_ms": fw.period_ms,
         "kilo_iterations": fw.kilo_iterations,
@@ -144,10 +144,9 @@ def _scene(cs: CaptureSet, spec: ObjectSpec | None, tag1: geo.Pose, offset: np.n
     return scene
 
 
-def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisance, config: dict, scene: TrackedScene) -> dict:
+def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisance, config: dict, phot: Photometry, scene: TrackedScene) -> dict:
     """One location of one set: the histograms of every repeat and both cameras' RGB-D frames."""
     rig, seed = config["rig"], config["seed"]
-    phot = Photometry.from_config(rig["photometry"])
     offset = gantry_offset(rig["nuisances"], seed, cs.name, k)
     light = transport(cs.resolution, _scene(cs, spec, scene.tag1_pose(k), offset, nuisance), phot)
     hist = np.stack(
@@ -173,10 +172,10 @@ def _record(cs: CaptureSet, spec: ObjectSpec | None, k: int, nuisance: SetNuisan
     return {"iter": k, "histogram": hist, "frames": frames}
 
 
-def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, outs: list[Path], fmt: str) -> None:
+def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, axis: geo.TimeAxis, outs: list[Path], fmt: str) -> None:
     """Write capture sets of one object and size (any resolutions and lightings)
     to `outs`: release folders in `rig.layout` (fmt `release`) or pickle
-    streams (fmt `pickle`, layout `full` only).
+    streams (fmt `pickle`, layout `full` only), histograms on `axis`.
     Each output is written atomically. Every set is its own mounting and
     session (`rig.nuisances`), so each computes its own light transport."""
     if len({(s.object, s.size) for s in sets}) != 1:
@@ -196,11 +195,12 @@ def synth_sets(sets: list[CaptureSet], spec: ObjectSpec | None, config: dict, ou
     writer = {"release": partial(_ReleaseWriter, layout=layout), "pickle": _PickleWriter}[fmt]
     nuisances = {cs.name: draw_set(config["rig"]["nuisances"], config["seed"], cs.name) for cs in sets}
     scene = tracked_scene(config["rig"]["scene_poses"])
+    phot = Photometry.from_config(config["rig"]["photometry"], axis)
     with ExitStack() as stack:
-        writers = [stack.enter_context(writer(out, metadata_record(cs, locations, config["rig"]))) for cs, out in zip(sets, outs)]
+        writers = [stack.enter_context(writer(out, metadata_record(cs, locations, config["rig"], axis))) for cs, out in zip(sets, outs)]
         for k in map(int, locations):
             for cs, w in zip(sets, writers):
-                w.add(_record(cs, spec, k, nuisances[cs.name], config, scene))
+                w.add(_record(cs, spec, k, nuisances[cs.name], config, phot, scene))
         for cs, w in zip(sets, writers):
             w.finish(truth_record(cs, spec, locations, config, scene))
 

@@ -34,19 +34,20 @@ def plate_corners(size: str, location: int) -> np.ndarray:
     return geo.object_pose(location).apply(local)
 
 
-def bump_window(resolution: str, size: str, location: int, zone: tuple[int, int]) -> tuple[float, float]:
-    """First and last bin (fractional) of the predicted three-bounce return."""
+def bump_window(resolution: str, size: str, location: int, zone: tuple[int, int], axis: geo.TimeAxis) -> tuple[float, float]:
+    """First and last bin (fractional, on `axis`) of the predicted three-bounce return."""
     ws = wall_samples(resolution)
     z = zone[0] * geo.RESOLUTIONS[resolution] + zone[1]
     q, r = ws.q[z], ws.r[z]
     o = plate_corners(size, location)
     opl = 2 * r[:, None] + 2 * np.linalg.norm(q[:, None, :] - o[None, :, :], axis=-1)
-    b = geo.opl_to_bin(opl)
+    b = axis.opl_to_bin(opl)
     return float(b.min() - PULSE_MARGIN_BINS[0]), float(b.max() + PULSE_MARGIN_BINS[1])
 
 
-def rig_examples(pairs: list[tuple[Path, Path]], out_png: Path) -> None:
-    """Plot each (object set store, NOOBJECT set store) pair; write PNG + CSV."""
+def rig_examples(pairs: list[tuple[Path, Path]], axis: geo.TimeAxis, out_png: Path) -> None:
+    """Plot each (object set store, NOOBJECT set store) pair, captured on
+    `axis`; write PNG + CSV."""
     rows = []
     fig, axes = plt.subplots(len(pairs), 3, figsize=(13, 3.4 * len(pairs)), squeeze=False)
     for ax_row, (obj_path, bg_path) in zip(axes, pairs):
@@ -61,7 +62,7 @@ def rig_examples(pairs: list[tuple[Path, Path]], out_png: Path) -> None:
             zone = geo.centre_zone(cs.resolution)
             obj = obj_store.histogram(obj_store.index_of(k)).mean(0)[zone]
             bg = bg_store.histogram(bg_store.index_of(k)).mean(0)[zone]
-            lo, hi = bump_window(cs.resolution, cs.size, k, zone)
+            lo, hi = bump_window(cs.resolution, cs.size, k, zone, axis)
             bins = np.arange(geo.N_BINS)
             diff = obj - bg
             smooth = np.convolve(diff, np.ones(SMOOTH_BINS) / SMOOTH_BINS, mode="same")

@@ -97,6 +97,8 @@ class Photometry:
         scatter evenly over the SPAD array (veiling glare: stray light of the
         lens and the cover glass), which every zone then collects in
         proportion to its SPADs (`glare`).
+    time_axis: the histograms' bins in time and optical path (config
+        `sensor.time_axis`).
     """
 
     direct_peak_counts: float
@@ -118,10 +120,13 @@ class Photometry:
     beam_pitch_deg: float
     vignetting_power: float
     glare_share: float
+    time_axis: geo.TimeAxis
 
     @classmethod
-    def from_config(cls, d: dict) -> "Photometry":
-        return cls(**{k: tuple(map(float, d[k])) if isinstance(d[k], list) else float(d[k]) for k in cls.__dataclass_fields__})
+    def from_config(cls, d: dict, time_axis: geo.TimeAxis) -> "Photometry":
+        """The photometry of config `rig.photometry` (`d`) on `time_axis`."""
+        values = {k: tuple(map(float, d[k])) if isinstance(d[k], list) else float(d[k]) for k in cls.__dataclass_fields__ if k != "time_axis"}
+        return cls(**values, time_axis=time_axis)
 
     @property
     def pulse(self) -> pulse.Pulse:
@@ -246,12 +251,13 @@ def collected(ws: WallSamples, phot: Photometry) -> np.ndarray:
     return ws.omega * phot.response(ws.d_cam)
 
 
-def _splat(hist: np.ndarray, zone: np.ndarray, opl: np.ndarray, weight: np.ndarray) -> None:
-    """Add `weight` at fractional bins of `opl` (linear interpolation) into hist (Z, B).
-    Paths outside the time window land in padding columns that are dropped."""
+def _splat(hist: np.ndarray, zone: np.ndarray, opl: np.ndarray, weight: np.ndarray, axis: geo.TimeAxis) -> None:
+    """Add `weight` at fractional bins of `opl` (m, on `axis`; linear
+    interpolation) into hist (Z, B). Paths outside the time window land in
+    padding columns that are dropped."""
     nz, nb = hist.shape
     width = nb + 3
-    b = geo.opl_to_bin(opl) - 0.5  # bin centres sit at integer + 0.5
+    b = axis.opl_to_bin(opl) - 0.5  # bin centres sit at integer + 0.5
     lo = np.floor(b)
     f = b - lo
     idx = zone * width + (np.clip(lo, -1, nb) + 1).astype(np.int64)
@@ -286,7 +292,7 @@ def transport(resolution: str, scatterers: list[Scatterer], phot: Photometry) ->
     collect = collected(ws, phot)
     # radiance of q toward the sensor per unit irradiance, times the ray's weighted solid angle
     seen = (rho_w / np.pi) * collect.reshape(-1)
-    _splat(hist, zone, 2 * r_q, seen * e_q)
+    _splat(hist, zone, 2 * r_q, seen * e_q, phot.time_axis)
 
     nw = geo.WALL.normal
     for sc in scatterers:
@@ -304,7 +310,7 @@ def transport(resolution: str, scatterers: list[Scatterer], phot: Photometry) ->
         if sc.rho_retro > 0:
             radiance_in = (rho_w / np.pi) * e_q  # L(q -> o)
             w = sc.rho_retro * radiance_in[None, :] * g_oq * seen[None, :]
-            _splat(hist, np.broadcast_to(zone, w.shape).ravel(), (2 * r_q + 2 * dist).ravel(), w.ravel())
+            _splat(hist, np.broadcast_to(zone, w.shape).ravel(), (2 * r_q + 2 * dist).ravel(), w.ravel(), phot.time_axis)
         if sc.rho_diffuse > 0:
             _add_diffuse(hist, zone, r_q, seen, g_oq, dist, sc, phot)
     ambient = (collect * (1.0 - np.clip(blocked.reshape(nz, ns), 0.0, 1.0))).sum(1) / collect.sum(1)
@@ -347,7 +353,7 @@ def _add_diffuse(hist, zone, r_q, seen, g_oq, d_oq, sc: Scatterer, phot: Photome
     o_index = np.repeat(np.arange(len(sc.points)), len(r_q))
     for ip in range(len(p)):
         opl = base_opl + (r_p[ip] + dist_po[ip])[o_index]
-        _splat(hist, zones, opl, (radiance_o[ip][:, None] * w_oq).ravel())
+        _splat(hist, zones, opl, (radiance_o[ip][:, None] * w_oq).ravel(), phot.time_axis)
 
 
 def pulse_kernel(phot: Photometry, shift_bins: float = 0.0) -> np.ndarray:

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from denali_pipe.core.geometry import gantry_row_col
+from denali_pipe.core.geometry import TimeAxis, gantry_row_col
 from denali_pipe.train.cells import ALL
 from denali_pipe.train.jitter import CONDITION_PATTERN as JITTER_PATTERN
 from denali_pipe.train.jitter import centre_zone, jitter, jitter_fwhm
@@ -112,11 +112,13 @@ def ill_posed(samples: pd.DataFrame, task: str, condition: str) -> str | None:
     return None
 
 
-def condition_view(x: np.ndarray, samples: pd.DataFrame, task: str, condition: str) -> tuple[np.ndarray, pd.DataFrame]:
+def condition_view(x: np.ndarray, samples: pd.DataFrame, task: str, condition: str, axis: TimeAxis | None = None) -> tuple[np.ndarray, pd.DataFrame]:
     """The features (N', n', n', T) and sample table (N' rows, renumbered) a
     cell of `task` trains and tests on under `condition`: the rows it keeps
     of x (N, n, n, T) and `samples`, for a jitter condition their 3x3 centre
-    zone (N', 1, 1, T) blurred. ValueError if the task is ill-posed there."""
+    zone (N', 1, 1, T) blurred in bins of `axis` (the captures' time axis,
+    which only a jitter condition needs). ValueError if the task is
+    ill-posed there."""
     reason = ill_posed(samples, task, condition)
     if reason is not None:
         raise ValueError(f"{task} is ill-posed: {reason}")
@@ -124,5 +126,7 @@ def condition_view(x: np.ndarray, samples: pd.DataFrame, task: str, condition: s
     kept = x if mask.all() else x[mask]  # `all` keeps the array itself, not a copy
     fwhm = jitter_fwhm(condition)
     if fwhm is not None:
-        kept = jitter(centre_zone(kept), fwhm)
+        if axis is None:
+            raise ValueError(f"condition {condition} blurs in ps: it needs the captures' time axis")
+        kept = jitter(centre_zone(kept), fwhm, axis)
     return kept, samples[mask].reset_index(drop=True)

@@ -8,10 +8,11 @@ original). experiments/jitter.py gathers the cells into the sweep's table.
 The kernel is bin-integrated: tap j is the probability that a Gaussian
 timing error moves a count from the centre of its bin into the bin j bins
 away, Phi((j + 1/2) / sigma) - Phi((j - 1/2) / sigma), sigma = FWHM /
-(2 sqrt(2 ln 2)) in bins. Sampling the Gaussian at bin centres instead
-collapses to a delta below a bin: at 50 ps FWHM (sigma 0.27 bins) its
-neighbour taps are 0.1 %, here 3.3 %, so sub-bin widths still blur. The
-bin width is geometry.BIN_WIDTH_PS (3/128 m of optical path, 78.2 ps).
+(2 sqrt(2 ln 2)) in bins of the captures' time axis (config
+`sensor.time_axis`). Sampling the Gaussian at bin centres instead
+collapses to a delta below a bin: at 50 ps FWHM in 78.2-ps bins (sigma
+0.27 bins) its neighbour taps are 0.1 %, here 3.3 %, so sub-bin widths
+still blur.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import re
 
 import numpy as np
 
-from denali_pipe.core.geometry import BIN_WIDTH_PS, RESOLUTIONS
+from denali_pipe.core.geometry import RESOLUTIONS, TimeAxis
 
 RESOLUTION = "3x3"  # the captures whose centre zone the sweep blurs
 FWHM_PER_SIGMA = 2.0 * math.sqrt(2.0 * math.log(2.0))
@@ -42,15 +43,15 @@ def jitter_fwhm(condition: str) -> int | None:
     return None if m is None else int(m[1])
 
 
-def jitter_kernel(fwhm_ps: float) -> np.ndarray:
+def jitter_kernel(fwhm_ps: float, axis: TimeAxis) -> np.ndarray:
     """(2K + 1,) float64 taps summing to one, centred on tap K: the
-    bin-integrated Gaussian of FWHM `fwhm_ps` (module docstring), truncated
-    at KERNEL_HALF_WIDTH_SIGMAS; [1.0] for FWHM 0."""
+    bin-integrated Gaussian of FWHM `fwhm_ps` in bins of `axis` (module
+    docstring), truncated at KERNEL_HALF_WIDTH_SIGMAS; [1.0] for FWHM 0."""
     if fwhm_ps < 0:
         raise ValueError(f"jitter FWHM must be >= 0 ps, got {fwhm_ps}")
     if fwhm_ps == 0:
         return np.ones(1)
-    sigma = fwhm_ps / BIN_WIDTH_PS / FWHM_PER_SIGMA
+    sigma = fwhm_ps / axis.bin_width_ps / FWHM_PER_SIGMA
     half = max(1, math.ceil(KERNEL_HALF_WIDTH_SIGMAS * sigma))
     edges = np.array([_normal_cdf((j + 0.5) / sigma) for j in range(-half - 1, half + 1)])
     taps = np.diff(edges)
@@ -61,10 +62,11 @@ def _normal_cdf(z: float) -> float:
     return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
 
 
-def jitter(x: np.ndarray, fwhm_ps: float) -> np.ndarray:
-    """x (..., T) counts blurred along the last (time) axis by `jitter_kernel`:
-    a linear convolution, zero beyond the ends, the same T bins kept; float32."""
-    taps = jitter_kernel(fwhm_ps)
+def jitter(x: np.ndarray, fwhm_ps: float, axis: TimeAxis) -> np.ndarray:
+    """x (..., T) counts in bins of `axis` blurred along the last (time) axis
+    by `jitter_kernel`: a linear convolution, zero beyond the ends, the same
+    T bins kept; float32."""
+    taps = jitter_kernel(fwhm_ps, axis)
     half, bins = len(taps) // 2, x.shape[-1]
     padded = np.pad(np.asarray(x, np.float64), [(0, 0)] * (x.ndim - 1) + [(half, half)])
     # the taps are symmetric, so this sliding sum is the convolution

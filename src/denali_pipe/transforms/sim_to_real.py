@@ -663,12 +663,14 @@ def choose_mode(train: Pairs, seed: int, fraction: float) -> tuple[str, dict, di
 # --- the file ---------------------------------------------------------------------------
 
 
-def write_transforms(path: Path, zt: ZoneTransforms, checks: list[FitCheck], record: dict) -> None:
+def write_transforms(path: Path, zt: ZoneTransforms, checks: list[FitCheck], axis: geo.TimeAxis, record: dict) -> None:
     """transforms.json: the mode, one entry per zone (row-major) with its
-    parameters and check (under "check"), and `record` (what they were fitted on)."""
+    parameters and check (under "check"), the kernel's bins (their number and
+    width on `axis`, the captures' time axis) and `record` (what they were
+    fitted on)."""
     zones = [{**t.to_dict(), "check": c.to_dict()} for t, c in zip(zt.zones, checks)]
     with atomic_file(Path(path)) as tmp:
-        body = {"mode": zt.mode, "zones": zones, "kernel_bins": KERNEL_BINS, "bin_width_opl": geo.BIN_WIDTH_OPL, **record}
+        body = {"mode": zt.mode, "zones": zones, "kernel_bins": KERNEL_BINS, "bin_width_opl": axis.bin_width_opl, **record}
         tmp.write_text(json.dumps(body, indent=1) + "\n")
 
 

@@ -147,7 +147,7 @@ class AnalyticRenderer:
             e_o = e.sum(axis=1)
             leg = r + self.r_lit[None, :]
             lead = (e * leg).sum(axis=1) / np.maximum(e_o, 1e-300)
-            spread = _bin((leg - lead[:, None]).reshape(1, -1), (e * self.area[:, None]).reshape(1, -1), "tent", SPREAD_BINS)[0]
+            spread = _bin((leg - lead[:, None]).reshape(1, -1), (e * self.area[:, None]).reshape(1, -1), tw.time_axis, "tent", SPREAD_BINS)[0]
             return o, n_o, e_o * self.area, lead, spread / max(spread.sum(), 1e-300)
         d_po = o - tw.spot
         r_po = np.linalg.norm(d_po, axis=1)
@@ -177,7 +177,7 @@ class AnalyticRenderer:
             f = brdf(material, ((self.x @ to_spot.T) - np.einsum("nk,nk->n", o, to_spot)[None, :]) / r_ox)
         w = tw.wall_albedo / np.pi * flux_o[None, :] * f * along_o * along_x / r2**2
         opl = self.r_xs[:, None] + r_ox + (r_po + self.r_sp + tw.time_offset_opl)[None, :]
-        return _bin(opl, w, self.filter).reshape(len(self.relays), tw.film, tw.film, geo.N_BINS)
+        return _bin(opl, w, tw.time_axis, self.filter).reshape(len(self.relays), tw.film, tw.film, geo.N_BINS)
 
     def _render_flood(self, material: Material, terms: tuple, r2, r_ox, along_o, along_x) -> np.ndarray:
         """The flood's render (module docstring) from the (P, N) o -> x terms."""
@@ -186,21 +186,22 @@ class AnalyticRenderer:
         share = material.diffuse_share if material.kind == "retroreflective" else 1.0
         geometry = tw.wall_albedo / np.pi * along_o * along_x / r2**2  # rho_w/pi cos_o' cos_x / |x - o|^2
         opl = self.r_xs[:, None] + r_ox + (lead + tw.time_offset_opl)[None, :]
-        out = _bin(opl, geometry * (share * material.albedo / np.pi) * flux_o[None, :], self.filter)
+        out = _bin(opl, geometry * (share * material.albedo / np.pi) * flux_o[None, :], tw.time_axis, self.filter)
         out = convolve1d(out, spread, axis=1, mode="constant")
         if share < 1:
             back = geometry * ((1 - share) * material.albedo * self.area)[None, :] * (along_o / r_ox) * self.radiance_x[:, None]
-            out += _bin(2 * (self.r_xs[:, None] + r_ox) + tw.time_offset_opl, back, self.filter)
+            out += _bin(2 * (self.r_xs[:, None] + r_ox) + tw.time_offset_opl, back, tw.time_axis, self.filter)
         return out.reshape(len(self.relays), tw.film, tw.film, geo.N_BINS)
 
 
-def _bin(opl: np.ndarray, weight: np.ndarray, filter: str = "box", centred: int | None = None) -> np.ndarray:
-    """Weights (P, N) at sensor-relative paths opl (P, N) into (P, N_BINS),
-    box filtered (into the bin holding the path) or tent filtered (shared
-    between the two bin centres around it, linearly). With `centred`, opl
-    are path differences binned into 2 centred + 1 bins about 0 instead."""
+def _bin(opl: np.ndarray, weight: np.ndarray, axis: geo.TimeAxis, filter: str = "box", centred: int | None = None) -> np.ndarray:
+    """Weights (P, N) at sensor-relative paths opl (P, N, m) into (P, N_BINS)
+    of `axis`, box filtered (into the bin holding the path) or tent filtered
+    (shared between the two bin centres around it, linearly). With
+    `centred`, opl are path differences binned into 2 centred + 1 bins of
+    the axis's width about 0 instead."""
     p = opl.shape[0]
-    pos = geo.opl_to_bin(opl) if centred is None else opl / geo.BIN_WIDTH_OPL + centred + 0.5
+    pos = axis.opl_to_bin(opl) if centred is None else opl / axis.bin_width_opl + centred + 0.5
     n_bins = geo.N_BINS if centred is None else 2 * centred + 1
     rows = np.arange(p)[:, None] * n_bins
     if filter == "box":

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from denali_pipe.core.geometry import Rect
+from denali_pipe.core.geometry import Rect, TimeAxis
 from denali_pipe.core.meshes import object_mesh
 from denali_pipe.core.objects import ObjectSpec
 from denali_pipe.core.seeds import derive_seed, rng_for
@@ -130,8 +130,8 @@ def nl2(h: np.ndarray, ref: np.ndarray) -> float:
 class _Renderers:
     """One renderer per (configuration, object, size), built on first use."""
 
-    def __init__(self, cal: Calibration, settings: dict, seed: int):
-        self.cal, self.settings, self.seed = cal, {**settings, "illumination": "spot"}, seed  # the spot: see the module
+    def __init__(self, cal: Calibration, settings: dict, axis: TimeAxis, seed: int):
+        self.cal, self.settings, self.axis, self.seed = cal, {**settings, "illumination": "spot"}, axis, seed  # the spot: see the module
         self.footprints = zone_footprints(cal, GRID)
         self.cache: dict = {}
 
@@ -144,14 +144,14 @@ class _Renderers:
             mesh = object_mesh(spec, size)
             material = material_of(self.settings, spec.material == "retroreflective")
             if config.film == "wall":
-                twin = twin_scene(self.cal, mesh, self.settings, relays=(self.cal.wall,), film=PAPER_FILM, material=material)
+                twin = twin_scene(self.cal, mesh, self.settings, self.axis, relays=(self.cal.wall,), film=PAPER_FILM, material=material)
                 fps = self.footprints
                 readouts = {
                     config.name: {CENTRE_ZONE: centre_block(self.cal.wall, PAPER_FILM, fps[CENTRE_ZONE].centre, PAPER_BLOCK)[None]},
                     f"{config.name}, footprint pixels": {z: pixels_inside(self.cal.wall, PAPER_FILM, fp)[None] for z, fp in enumerate(fps)},
                 }
             else:
-                twin = twin_scene(self.cal, mesh, self.settings, GRID, material=material)
+                twin = twin_scene(self.cal, mesh, self.settings, self.axis, GRID, material=material)
                 readouts = {config.name: {z: np.arange(len(twin.relays))[:, None, None] == z for z in range(len(twin.relays))}}
                 readouts[config.name] = {z: np.broadcast_to(m, (len(twin.relays), twin.film, twin.film)) for z, m in readouts[config.name].items()}
             settings = {**self.settings, "renderer": config.renderer, "mitransient": {**self.settings["mitransient"], "spp": config.spp}}
@@ -160,8 +160,8 @@ class _Renderers:
         return (*self.cache[key], fresh)
 
 
-def run_benchmark(cal: Calibration, specs: list[ObjectSpec], sizes: list[str], settings: dict, seed: int) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Render every configuration on the benchmark's scenes.
+def run_benchmark(cal: Calibration, specs: list[ObjectSpec], sizes: list[str], settings: dict, axis: TimeAxis, seed: int) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Render every configuration on the benchmark's scenes, on `axis`.
 
     settings: the `twin` config section (with its `benchmark`, `analytic`
     and `mitransient` parts). Returns (summary, per_scene): per_scene has
@@ -170,7 +170,7 @@ def run_benchmark(cal: Calibration, specs: list[ObjectSpec], sizes: list[str], s
     readout (see `summarise`)."""
     bench = settings["benchmark"]
     scenes = benchmark_scenes(specs, sizes, cal.locations, int(bench["n_scenes"]), seed)
-    renderers = _Renderers(cal, settings, seed)
+    renderers = _Renderers(cal, settings, axis, seed)
     reference = Configuration("reference", "mitransient", "footprint", int(bench["reference_spp"]))
     refs = {}
     for sc in scenes:

@@ -67,10 +67,10 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares, nnls
 
-from denali_pipe.core import geometry as geo
 from denali_pipe.core import pulse
 from denali_pipe.core.atomic import atomic_file
 from denali_pipe.core.floor import common_offset, kept_bins, offset_spread
+from denali_pipe.core.geometry import TimeAxis
 from denali_pipe.core.glare import glare
 from denali_pipe.core.meshes import object_mesh
 from denali_pipe.core.objects import ObjectSpec
@@ -156,13 +156,14 @@ class Fitted:
         moved = np.c_[target, np.ones(len(target))] @ affine
         return ZoneGeometry((moved - target).reshape(n, n, 2), np.full((n, n), float(self.scales.mean())))
 
-    def twin_scene(self, cal: Calibration, mesh, settings: dict, n: int, spec: ObjectSpec) -> TwinScene:
-        """The calibrated twin of `mesh` on the n x n grid (non-RR objects stay Lambertian)."""
+    def twin_scene(self, cal: Calibration, mesh, settings: dict, axis: TimeAxis, n: int, spec: ObjectSpec) -> TwinScene:
+        """The calibrated twin of `mesh` on the n x n grid, on `axis` (the
+        captures' it was fitted to; non-RR objects stay Lambertian)."""
         rr = spec.material == "retroreflective"
         material = self.material if rr else material_of(settings, False)
         return twin_scene(
-            cal, mesh, {**settings, "illumination": self.illumination}, n, zones=self.zones(cal, n), material=material,
-            time_offset_opl=self.time_offset * geo.BIN_WIDTH_OPL, emission=self.emission,
+            cal, mesh, {**settings, "illumination": self.illumination}, axis, n, zones=self.zones(cal, n), material=material,
+            time_offset_opl=self.time_offset * axis.bin_width_opl, emission=self.emission,
         )  # fmt: skip
 
 
@@ -189,15 +190,18 @@ class Captures:
 class Model:
     """The analytic twins of a set of captures, zone by zone, under changing
     parameters. specs: {object name: ObjectSpec}; settings: the `twin`
-    section (its `calibration` part: film, samples)."""
+    section (its `calibration` part: film, samples); axis: the captures'
+    time axis."""
 
-    def __init__(self, cal: Calibration, specs: dict, keys: pd.DataFrame, settings: dict):
+    def __init__(self, cal: Calibration, specs: dict, keys: pd.DataFrame, settings: dict, axis: TimeAxis):
         self.cal, self.settings, self.keys = cal, settings, keys
         self.meshes = {(name, size): object_mesh(specs[name], size) for (name, size), _ in keys.groupby(["object", "size"], sort=False)}
         c = settings["calibration"]
         scene = {**settings, "footprint": {**settings["footprint"], "film": c["film"]}}
         design = _unpack(initial(settings), settings)[4]  # the design's light, as the fit's first step computes it
-        self.renderers = {key: AnalyticRenderer(twin_scene(cal, mesh, scene, GRID, emission=design), c["samples"], "tent") for key, mesh in self.meshes.items()}
+        self.renderers = {
+            key: AnalyticRenderer(twin_scene(cal, mesh, scene, axis, GRID, emission=design), c["samples"], "tent") for key, mesh in self.meshes.items()
+        }
         self._object_terms(design)
 
     def _light(self, emission: Emission) -> None:
@@ -598,8 +602,8 @@ class Result:
     fit: dict
 
 
-def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict, seed: int) -> tuple[Result, Problem, Problem]:
-    """Fit the twin on `captures` (the training split's), holding out
+def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict, axis: TimeAxis, seed: int) -> tuple[Result, Problem, Problem]:
+    """Fit the twin on `captures` (the training split's, on `axis`), holding out
     `calibration.validation_fraction` of them (by capture, seeded) to score
     the fit. Returns the result and the fit and validation problems."""
     c = settings["calibration"]
@@ -613,8 +617,8 @@ def calibrate(cal: Calibration, specs: dict, captures: Captures, settings: dict,
     if c["max_captures"] and len(train) > c["max_captures"]:
         train = np.sort(rng.choice(train, c["max_captures"], replace=False))
     fit_cap, val_cap = captures.subset(train), captures.subset(val)
-    problem = Problem(Model(cal, specs, fit_cap.keys, settings), fit_cap, settings)
-    held = Problem(Model(cal, specs, val_cap.keys, settings), val_cap, settings)
+    problem = Problem(Model(cal, specs, fit_cap.keys, settings, axis), fit_cap, settings)
+    held = Problem(Model(cal, specs, val_cap.keys, settings, axis), val_cap, settings)
     x0 = initial(settings)
     for p in (problem, held):
         p.take_floor_offsets(x0)

@@ -39,7 +39,7 @@ import numpy as np
 import trimesh
 
 from denali_pipe.core import geometry as geo
-from denali_pipe.core.geometry import Camera, Intrinsics, Pose, Rect
+from denali_pipe.core.geometry import Camera, Intrinsics, Pose, Rect, TimeAxis
 from denali_pipe.core.objects import BOTTOM_Y
 from denali_pipe.twin.illumination import check_illumination
 
@@ -391,9 +391,10 @@ class TwinScene:
     origin; spot: (3,) where the sensor's axis meets the wall (the laser
     spot); flood: the flood illumination, None for the spot alone; mesh: the object's full
     mesh (local); vertices/faces: its wall-facing face (local); poses:
-    {location: object pose}; material: the object's; time_offset_opl: m of
-    optical path added to every path (the captures' time zero against the
-    design's); tables: table tops (empty without table)."""
+    {location: object pose}; material: the object's; time_axis: the bins
+    the renderers draw into (config `sensor.time_axis`); time_offset_opl: m
+    of optical path added to every path (the captures' time zero against
+    the design's); tables: table tops (empty without table)."""
 
     relays: tuple[Rect, ...]
     film: int
@@ -405,6 +406,7 @@ class TwinScene:
     poses: dict[int, Pose]
     wall_albedo: float
     material: Material
+    time_axis: TimeAxis
     time_offset_opl: float = 0.0
     tables: tuple[Rect, ...] = ()
     table_albedo: float = 0.0
@@ -425,6 +427,7 @@ def twin_scene(
     cal: Calibration,
     mesh: trimesh.Trimesh,
     twin: dict,
+    axis: TimeAxis,
     n: int = 3,
     zones: ZoneGeometry | None = None,
     relays: tuple[Rect, ...] | None = None,
@@ -434,9 +437,10 @@ def twin_scene(
     emission: Emission | None = None,
 ) -> TwinScene:
     """The twin of one object mesh from the calibration and the config's
-    `twin` section (footprint, albedos, material, table, illumination), with one film per
-    zone of the n x n grid (`zone_footprints` of `zones`, the design FoV
-    scaled by `footprint.scale` when None). `relays`/`film` override the
+    `twin` section (footprint, albedos, material, table, illumination),
+    rendered on `axis`, with one film per zone of the n x n grid
+    (`zone_footprints` of `zones`, the design FoV scaled by
+    `footprint.scale` when None). `relays`/`film` override the
     patches and their film (the benchmark's whole-wall film); `material`
     the configured one (`material_of`); `emission` the flood's configured
     one (`emission_of`). No illumination set: the paper's spot."""
@@ -459,6 +463,7 @@ def twin_scene(
         poses=cal.object_poses,
         wall_albedo=float(twin["wall_albedo"]),
         material=material or material_of(twin),
+        time_axis=axis,
         time_offset_opl=float(time_offset_opl),
         tables=cal.tables if twin["table"] else (),
         table_albedo=float(twin["table_albedo"]),

@@ -8,8 +8,9 @@ Store layout (Zarr v3, one group), per rendered grid n x n (3x3, 8x8):
                                    its footprint film averaged over its pixels,
                                    in radiance per unit laser intensity per
                                    bin, sensor-relative optical path like the
-                                   real data (bin b covers HIST_START_OPL +
-                                   [b, b+1) w); zones in the captures' order;
+                                   real data (bin b covers start_opl +
+                                   [b, b+1) bin_width_opl); zones in the
+                                   captures' order;
                                    a calibrated 3x3 grid as each zone collects
                                    it through the receiver's glare
                                    (`calibrate.Fitted.receive`)
@@ -76,10 +77,10 @@ def _sha(path: Path) -> dict:
     return {"path": str(path), "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest()}
 
 
-def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out: Path, calibration: Path | None = None) -> Path:
+def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, axis: geo.TimeAxis, out: Path, calibration: Path | None = None) -> Path:
     """Render object `spec` at `size` at every location of the calibrated
     scene `scene_json`, every zone of each grid of config["resolutions"],
-    and write the twin store `out` atomically.
+    on `axis`, and write the twin store `out` atomically.
 
     config: {"seed": int, "resolutions": ["3x3", ...], "twin": the twin
     section (renderer, albedos, material, footprint, table and the chosen
@@ -102,9 +103,9 @@ def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out
     for res in config["resolutions"]:
         n = geo.RESOLUTIONS[res]
         twin = (
-            fitted.twin_scene(cal, mesh, settings, n, spec)
+            fitted.twin_scene(cal, mesh, settings, axis, n, spec)
             if fitted
-            else twin_scene(cal, mesh, settings, n, material=material_of(settings, spec.material == "retroreflective"))
+            else twin_scene(cal, mesh, settings, axis, n, material=material_of(settings, spec.material == "retroreflective"))
         )
         renderer = make_renderer(twin, settings, derive_seed(seed, res))
         out_res = []
@@ -125,8 +126,8 @@ def render_twin(spec: ObjectSpec, size: str, scene_json: Path, config: dict, out
         "material": twin.material.to_dict(),
         "calibration": _sha(calibration) if calibration is not None else None,
         "seed": seed,
-        "bin_width_opl": geo.BIN_WIDTH_OPL,
-        "start_opl": geo.HIST_START_OPL,
+        "bin_width_opl": twin.time_axis.bin_width_opl,
+        "start_opl": twin.time_axis.start_opl,
         "time_offset_opl": twin.time_offset_opl,
         "footprints": footprints,
         "laser_spot": twin.spot.tolist(),

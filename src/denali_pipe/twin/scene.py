@@ -8,8 +8,8 @@ Transient scene (`transient_scene`), per mitransient's NLOS set-up, one
 per relay patch (a zone's footprint, or the whole wall):
 - `relay`: a rectangle over the patch, a Lambertian BSDF and the
   `nlos_capture_meter` sensor with a `transient_hdr_film` of film x film
-  pixels, 128 bins of BIN_WIDTH_OPL from HIST_START_OPL less the twin's
-  time offset (the real data's time axis);
+  pixels, 128 bins of the twin's time axis, starting at its start less the
+  twin's time offset (the real data's time axis);
 - `spot`: a SPOT_PATCH_M square of wall around the laser spot, SPOT_BEHIND_M
   behind the wall plane, for the laser to land on where the patch does not
   hold the spot (an off-centre zone): mitransient needs the laser to hit
@@ -101,8 +101,8 @@ def transient_scene(mi: ModuleType, twin: TwinScene, relay: Rect, max_depth: int
         "width": twin.film,
         "height": twin.film,
         "temporal_bins": geo.N_BINS,
-        "bin_width_opl": geo.BIN_WIDTH_OPL,
-        "start_opl": geo.HIST_START_OPL - twin.time_offset_opl,
+        "bin_width_opl": twin.time_axis.bin_width_opl,
+        "start_opl": twin.time_axis.start_opl - twin.time_offset_opl,
         "rfilter": {"type": "box"},
     }
     spot = Rect(twin.spot - SPOT_BEHIND_M * relay.normal, relay.u, relay.v, (SPOT_PATCH_M, SPOT_PATCH_M))
