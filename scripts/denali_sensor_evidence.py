@@ -44,13 +44,14 @@ SWEEP_KILO_ITERATIONS, DENALI_KILO_ITERATIONS = 4_000, 10_000
 
 def wall_paths(config: Path) -> np.ndarray:
     """(9,) each 3x3 zone's optical path (m) at its pulse-free wall return's peak (sub-bin, parabola)."""
+    # drawn on the paper's axis: any axis gives the same paths; this one starts at zero path
     with open(config) as f:
-        phot = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"])
+        phot = H.Photometry.from_config(yaml.safe_load(f)["rig"]["photometry"], geo.PAPER_TIME_AXIS)
     wall = H.transport("3x3", [], phot).hist.reshape(9, -1)
     b = wall.argmax(-1)
     y0, y1, y2 = (wall[np.arange(9), b + j] for j in (-1, 0, 1))
     peak = b + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
-    return (peak + 0.5) * geo.BIN_WIDTH_OPL + geo.HIST_START_OPL  # the bin's centre
+    return (peak + 0.5) * geo.PAPER_TIME_AXIS.bin_width_opl + geo.PAPER_TIME_AXIS.start_opl  # the bin's centre
 
 
 def time_axis(opl: np.ndarray, peaks: np.ndarray, name: str) -> None:
