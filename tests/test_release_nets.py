@@ -1,0 +1,60 @@
+"""`train/release_nets.py`: a release checkpoint as the project's 1D CNN, read
+without running code, and its layers loaded into a model to start from."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import pytest
+import torch
+
+from denali_pipe.train import release_nets as rn
+from denali_pipe.train.models import CNN1d, cnn1d, mlp
+
+CLASSIFIER = {"mlp.0.": "head.2.", "out_linear.": "head.5."}  # the release's classifier names its head apart
+
+
+def release_checkpoint(net: CNN1d, path, classifier: bool) -> None:
+    """Save `net` as the release saves its networks: its layers under the
+    release's names, numpy statistics and label names beside them."""
+    ours = {v: k for k, v in rn.RELEASE_NAMES.items() if not (classifier and k in ("mlp.0.", "out_linear."))} | (CLASSIFIER if classifier else {})
+    state = {}
+    for key, value in net.state_dict().items():
+        prefix = next(p for p in ours if key.startswith(p))
+        state[ours[prefix] + key.removeprefix(prefix)] = value
+    torch.save({"model_state_dict": state, "train_mean": np.float32(7.1), "train_std": np.float64(0.78), "classes": [np.str_("4inch"), np.str_("8inch")]}, path)
+
+
+def test_a_release_checkpoint_is_the_1d_cnn_layer_for_layer(tmp_path):
+    torch.manual_seed(0)
+    for task, classifier in (("size", True), ("location", False)):
+        original = cnn1d(task, 2, (3, 3, 128)).eval()
+        release_checkpoint(original, tmp_path / f"{task}.pth", classifier)
+        net, payload = rn.release_network(tmp_path / f"{task}.pth", task)
+        x = torch.randn(5, 3, 3, 128)
+        assert torch.equal(net(x), original(x)) and not net.training
+        assert payload["classes"] == ["4inch", "8inch"] and float(payload["train_mean"]) == pytest.approx(7.1)
+
+
+def test_a_checkpoint_that_would_run_code_is_refused(tmp_path):
+    torch.save({"model_state_dict": {}, "anything": argparse.Namespace(run="code")}, tmp_path / "bad.pth")
+    with pytest.raises(ValueError, match="bad.pth: not a checkpoint the weights-only reader accepts"):
+        rn.read_checkpoint(tmp_path / "bad.pth")
+    torch.save({"weights": {}}, tmp_path / "bare.pth")
+    with pytest.raises(ValueError, match="a dict with a model_state_dict"):
+        rn.read_checkpoint(tmp_path / "bare.pth")
+
+
+def test_init_loads_every_layer_that_fits_and_refuses_another_network(tmp_path):
+    torch.manual_seed(1)
+    release_checkpoint(cnn1d("shape", 30, (3, 3, 128)), tmp_path / "obj.pth", classifier=True)
+    model = cnn1d("shape", 3, (3, 3, 77))  # the run's 3 classes and cropped bins: the output layer stays fresh
+    fresh = rn.init_from_release(model, tmp_path / "obj.pth")
+    assert fresh == ["out_linear.bias", "out_linear.weight"]
+    release = rn.cnn1d_state(rn.read_checkpoint(tmp_path / "obj.pth")["model_state_dict"], "obj.pth")
+    assert all(torch.equal(model.state_dict()[k], v) for k, v in release.items() if not k.startswith("out_linear."))
+    with pytest.raises(ValueError, match="not the release's 1D CNN for its zones: features.0.weight"):
+        rn.init_from_release(cnn1d("shape", 3, (8, 8, 128)), tmp_path / "obj.pth")
+    with pytest.raises(ValueError, match="not the release's 1D CNN"):
+        rn.init_from_release(mlp("shape", 3, (3, 3, 128)), tmp_path / "obj.pth")
