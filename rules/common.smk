@@ -19,6 +19,7 @@ from denali_pipe.workflow.costs import combine, cost_model, frame_pixels, gpu_sp
 from denali_pipe.train.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.train.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition
 from denali_pipe.core.geometry import N_BINS, N_LOCATIONS, RESOLUTIONS, select_locations
+from denali_pipe.io.release_weights import RELEASE_FILES
 from denali_pipe.io.tree import survey_tree
 from denali_pipe.core.objects import BACKGROUNDS, VARIANTS, load_catalogue
 from denali_pipe.train.registry import check_left_out, check_models

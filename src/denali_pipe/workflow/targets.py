@@ -40,6 +40,7 @@ TARGETS = (
     Target("stability", "every failure mode of the run's cells, sim-to-real fit and twin calibration", "results/stability.csv"),
     Target("sensor fit", "the TMF882x's pulse, timing, pile-up and crosstalk fitted to real raw histograms", "results/sensor_fit.json"),
     Target("rig vs real", "the capture source's histograms beside real DENALI captures", "results/rig_vs_real.png"),
+    Target("release networks", "the release's 15 trained generalisation networks scored on this run's captures", "results/release_models.csv"),
     Target("rig examples", "raw histograms beside their background", "results/rig_examples.png"),
     Target("tag detections", "detection and pose rates per lighting and tag", "results/calibration/detections.csv"),
     Target("capture index", "one row per capture", "results/index/captures.parquet"),
