@@ -309,6 +309,13 @@ def factory_arg(wildcards):
     return f"--factory {shlex.quote(MODELS[wildcards.model]['factory'])}"
 
 
+def release_weights_input(wildcards):
+    """The release's weights folder (rule release_weights) for a cell whose settings start it from a release checkpoint (`init`)."""
+    if wildcards.model == LINEAR or "init" not in MODELS[wildcards.model][wildcards.task]:
+        return []
+    return ["results/release_weights"]
+
+
 def budget_arg(wildcards):
     budget = TRAIN["budget_seconds"]
     return "" if budget is None or wildcards.model == LINEAR else f"--budget-seconds {budget}"

@@ -1,18 +1,25 @@
 """`train/release_nets.py`: a release checkpoint as the project's 1D CNN, read
-without running code, and its layers loaded into a model to start from."""
+without running code; and a registered model's cells starting from one
+(`init: release:<file>`)."""
 
 from __future__ import annotations
 
 import argparse
 
 import numpy as np
+import pandas as pd
 import pytest
 import torch
 
+from denali_pipe.io.release_weights import STATUS, WeightsStatus
 from denali_pipe.train import release_nets as rn
+from denali_pipe.train.cells import Cell
 from denali_pipe.train.models import CNN1d, cnn1d, mlp
+from denali_pipe.train.registry import check_models
+from denali_pipe.train.training import Hyper, run_cell
 
 CLASSIFIER = {"mlp.0.": "head.2.", "out_linear.": "head.5."}  # the release's classifier names its head apart
+RANDOM_GROUPED = "split_checkpoints/splits_loc_random_grouped.pth"
 
 
 def release_checkpoint(net: CNN1d, path, classifier: bool) -> None:
@@ -58,3 +65,42 @@ def test_init_loads_every_layer_that_fits_and_refuses_another_network(tmp_path):
         rn.init_from_release(cnn1d("shape", 3, (8, 8, 128)), tmp_path / "obj.pth")
     with pytest.raises(ValueError, match="not the release's 1D CNN"):
         rn.init_from_release(mlp("shape", 3, (3, 3, 128)), tmp_path / "obj.pth")
+
+
+def weights_folder(tmp_path, available=True):
+    """A release weights folder (rule release_weights) whose random-grouped location checkpoint is a fresh 1D CNN."""
+    folder = tmp_path / "release_weights"
+    (folder / RANDOM_GROUPED).parent.mkdir(parents=True)
+    torch.manual_seed(2)
+    release_checkpoint(cnn1d("location", 2, (3, 3, 128)), folder / RANDOM_GROUPED, classifier=False)
+    (folder / STATUS).write_text(WeightsStatus(available, "a test", "" if available else "downloads are off").to_json())
+    return folder
+
+
+def small_dataset():
+    rng = np.random.default_rng(3)
+    rows = [{"set": f"1_{s}_3x3_lighton", "object": "1", "class": "1", "type": "number", "size": s, "light": "lighton", "location": k, "repeat": r,
+             "x": 1.0 + 0.0365 * k, "y": 0.3} for s in ("4inch", "8inch") for k in range(6) for r in range(2)]  # fmt: skip
+    return rng.poisson(500, (len(rows), 3, 3, 40)).astype(np.float32), pd.DataFrame(rows)
+
+
+def test_a_cell_starts_from_the_release_checkpoint_its_settings_name(tmp_path):
+    x, samples = small_dataset()
+    folder = weights_folder(tmp_path)
+    cell = Cell("cnn1d", "location", "random", "3x3", "paper", 42)
+    # a step too small to move a weight: the trained network's weights are the checkpoint's (its BN statistics follow the data)
+    hp = Hyper(lr=1e-12, epochs=1, batch_size=8, norm="log_z", init=f"release:{RANDOM_GROUPED}")
+    result = run_cell(x, samples, cell, hp, 0.2, "denali_pipe.train.models:cnn1d", release_weights=folder)
+    start = rn.cnn1d_state(rn.read_checkpoint(folder / RANDOM_GROUPED)["model_state_dict"], "start")
+    trained = result.state["model"]
+    weights = [k for k in start if not k.endswith(("running_mean", "running_var", "num_batches_tracked"))]
+    assert all(torch.allclose(trained[k], start[k], atol=1e-9) for k in weights)
+    assert result.metrics.hyper["init"] == f"release:{RANDOM_GROUPED}"
+    with pytest.raises(ValueError, match="holds none of the release's weights: downloads are off"):
+        run_cell(x, samples, cell, hp, 0.2, "denali_pipe.train.models:cnn1d", release_weights=weights_folder(tmp_path / "off", available=False))
+
+
+def test_the_registry_refuses_an_init_that_names_no_release_checkpoint():
+    entry = {"factory": "denali_pipe.train.models:cnn1d", "location": {"lr": 1e-3, "epochs": 1, "batch_size": 8, "norm": "raw", "init": "release:mine.pth"}}
+    with pytest.raises(ValueError, match=r"train.models.cnn1d.location.init 'release:mine.pth': expected 'release:<file>'"):
+        check_models({"cnn1d": entry}, "cnn1d")
