@@ -10,10 +10,12 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+import yaml
+from conftest import REPO
 
 from denali_pipe.io.release_weights import STATUS, WeightsStatus
 from denali_pipe.train import release_nets as rn
-from denali_pipe.train.cells import Cell
+from denali_pipe.train.cells import TASKS, Cell
 from denali_pipe.train.models import CNN1d, cnn1d, mlp
 from denali_pipe.train.registry import check_models
 from denali_pipe.train.training import Hyper, run_cell
@@ -104,3 +106,10 @@ def test_the_registry_refuses_an_init_that_names_no_release_checkpoint():
     entry = {"factory": "denali_pipe.train.models:cnn1d", "location": {"lr": 1e-3, "epochs": 1, "batch_size": 8, "norm": "raw", "init": "release:mine.pth"}}
     with pytest.raises(ValueError, match=r"train.models.cnn1d.location.init 'release:mine.pth': expected 'release:<file>'"):
         check_models({"cnn1d": entry}, "cnn1d")
+
+
+def test_the_example_compares_a_model_from_the_release_with_the_same_from_scratch():
+    models = check_models(yaml.safe_load((REPO / "examples" / "release_init.yaml").read_text())["train"]["models"], "cnn1d-log")
+    for task in TASKS:
+        real, scratch = dict(models["cnn1d-real"][task]), models["cnn1d-log"][task]
+        assert real.pop("init").startswith("release:split_checkpoints/") and real == scratch
