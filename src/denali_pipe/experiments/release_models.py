@@ -172,7 +172,10 @@ def _by_location(samples: pd.DataFrame, info: dict) -> Part:
     labels = _location_labels(samples)
     match, worst = match_locations(labels, np.concatenate([train, test]))
     if match is None:
-        what = f"this tree's location labels are not the release's positions (one lies {1000 * worst:.0f} mm from the nearest stored one)"
+        what = (
+            f"this tree's location labels are not the release's positions (the farthest lies {1000 * worst:.0f} mm from its nearest stored one;"
+            f" a match is within {1000 * MATCH_TOLERANCE_M:.0f} mm, one location a position)"
+        )
         return _drawn(samples, "location_held_out", len(test) / (len(train) + len(test)), what)
     held = sorted(k for k, i in match.items() if i >= len(train))
     rows = np.flatnonzero(samples["location"].isin(held).to_numpy())
