@@ -40,6 +40,8 @@ from denali_pipe.io.store import open_set
 from denali_pipe.report.paper import REAL_CENTRE_ZONE, REAL_LOG_ZONE_MEANS, REAL_ZONE_MEANS
 from denali_pipe.rig import feature_moments as fm
 from denali_pipe.rig.measure import measure
+from denali_pipe.train.cells import TASKS
+from denali_pipe.train.runs import HEADLINE
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +83,6 @@ ZONE_SOURCE = "capture source, every zone"
 REAL_ZONE_SOURCE = "real, every zone (release's models)"
 FEATURE_SOURCE = "capture source, feature moments"
 RELEASE_SOURCE = "capture source, release networks"
-TASK_ORDER = ("location", "shape", "size")
 LIGHT_COLOURS = {"lightoff": "tab:blue", "lighton": "tab:orange"}
 # The real captures' pooled spread of log1p(counts) (the release's generalisation checkpoints).
 REAL_LOG_SPREAD = 0.78
@@ -207,17 +208,17 @@ def release_scores(table: pd.DataFrame) -> tuple[pd.DataFrame, str]:
         notes = table.note.dropna().unique()
         return pd.DataFrame(columns=list(COLUMNS)), f"release networks: none scored ({notes[0] if len(notes) else 'no captures'})"
     both = scored[scored.light == "both"]
-    lower = both.metric == "rmse"
-    better = np.where(lower, both.value < both.baseline, both.value > both.baseline)
+    higher = both.task.map(lambda task: HEADLINE[task][1])
+    better = np.where(higher, both.value > both.baseline, both.value < both.baseline)
     rows = scored[scored.light != "both"].assign(source=RELEASE_SOURCE)
     return rows.reindex(columns=list(COLUMNS)), f"release networks: {int(better.sum())} of {len(both)} beat their baseline on these captures (both lightings)"
 
 
 def plot_release(axes, rows: pd.DataFrame) -> None:
-    """Per task (TASK_ORDER) a panel: each network's score per lighting as
+    """Per task (cells.TASKS) a panel: each network's score per lighting as
     bars, its baseline as a dashed line over them, and for location the
     correlations of its predicted x and y with the true ones."""
-    for ax, task in zip(axes, TASK_ORDER):
+    for ax, task in zip(axes, TASKS):
         t = rows[rows.task == task]
         if t.empty:
             ax.set_visible(False)
