@@ -19,6 +19,7 @@ from denali_pipe.workflow.costs import combine, cost_model, frame_pixels, gpu_sp
 from denali_pipe.train.conditions import ALL, PATTERN as CONDITION_PATTERN, TABLES as CONDITION_TABLES, ill_posed, table_conditions
 from denali_pipe.train.jitter import RESOLUTION as JITTER_RESOLUTION, jitter_condition, jitter_fwhm
 from denali_pipe.core.geometry import N_BINS, N_LOCATIONS, RESOLUTIONS, select_locations
+from denali_pipe.io.release_weights import RELEASE_FILES
 from denali_pipe.io.tree import survey_tree
 from denali_pipe.core.objects import BACKGROUNDS, VARIANTS, load_catalogue
 from denali_pipe.train.registry import check_left_out, check_models
@@ -309,6 +310,13 @@ def factory_arg(wildcards):
     if wildcards.model == LINEAR:
         return ""
     return f"--factory {shlex.quote(MODELS[wildcards.model]['factory'])}"
+
+
+def release_weights_input(wildcards):
+    """The release's weights folder (rule release_weights) for a cell whose settings start it from a release checkpoint (`init`)."""
+    if wildcards.model == LINEAR or "init" not in MODELS[wildcards.model][wildcards.task]:
+        return []
+    return ["results/release_weights"]
 
 
 def budget_arg(wildcards):

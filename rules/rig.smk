@@ -48,6 +48,7 @@ rule rig_vs_real:
         sets=[obj for obj, _ in rig_vs_real_pairs()],
         backgrounds=[bg for _, bg in rig_vs_real_pairs()],
         feature_stats=feature_stats_files(),
+        release_models="results/release_models.csv",
     output:
         png=report("results/rig_vs_real.png", caption="../report/rig_vs_real.rst", category="1. Captures"),
         csv="results/rig_vs_real.csv",
@@ -56,4 +57,5 @@ rule rig_vs_real:
     params:
         feature_stats=feature_stats_arg(),
     shell:
-        "{DENALI} rig-vs-real --sets {input.sets} --backgrounds {input.backgrounds} --png {output.png} --csv {output.csv} {params.feature_stats} > {log} 2>&1"
+        "{DENALI} rig-vs-real --sets {input.sets} --backgrounds {input.backgrounds} --png {output.png} --csv {output.csv} {params.feature_stats}"
+        " --release-models {input.release_models} > {log} 2>&1"

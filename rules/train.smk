@@ -9,6 +9,7 @@ rule train:
     input:
         x=lambda w: dataset_files(w.res, w.protocol)["x"],
         table=lambda w: dataset_files(w.res, w.protocol)["table"],
+        release_weights=release_weights_input,
     output:
         metrics=f"{RUN_DIR}/metrics.json",
         curves=f"{RUN_DIR}/curves.csv",
@@ -31,9 +32,11 @@ rule train:
         budget=budget_arg,
         precision=config["train"]["precision"],
         time_axis=cell_time_axis_arg,
+        release_weights=lambda w, input: f"--release-weights {input.release_weights}" if input.release_weights else "",
     shell:
         "{DENALI} train {input.x} --table {input.table} --cell {params.cell} --hyper {params.hyper} {params.factory}"
         " --validation-fraction {params.validation} {params.budget} --threads {threads} --precision {params.precision} {params.time_axis}"
+        " {params.release_weights}"
         " --outdir {params.outdir} > {log} 2>&1"
 
 

@@ -189,6 +189,13 @@ def test_the_sensor_fit_says_where_no_real_captures_were_found(tiny_run):
     assert (tiny_run / "results/sensor_vs_real.png").stat().st_size > 1_000
 
 
+def test_the_release_networks_say_why_they_were_not_scored(tiny_run):
+    # the scratch copy has no ../shared beside it and the tiny preset downloads nothing: each network's row says so
+    df = pd.read_csv(tiny_run / "results/release_models.csv")
+    assert len(df) == 15 and (df.n_samples == 0).all()
+    assert df.note.str.contains("no local copy at ../shared/denali-release, and downloads are off").all()
+
+
 def test_bad_set_fails_alone_with_keep_going(tiny_run, tmp_path):
     wd = tmp_path / "wd"
     shutil.copytree(tiny_run, wd, symlinks=True)

@@ -24,6 +24,7 @@ from denali_pipe.cli import (
     predict,
     preprocess,
     release,
+    release_models,
     report,
     rig,
     sensor,
@@ -38,7 +39,7 @@ log = logging.getLogger("denali")
 
 # Verbs for people, then the stage verbs in the order the DAG runs them.
 USER_MODULES = (targets, release, predict, export, explore)
-STAGE_MODULES = (sensor, rig, ingest, poses, preprocess, train, report, twin, fit, fig9, generalisation, tsne, jitter, stability)
+STAGE_MODULES = (sensor, rig, ingest, poses, preprocess, train, report, twin, fit, fig9, generalisation, release_models, tsne, jitter, stability)
 
 
 def build_parser() -> argparse.ArgumentParser:

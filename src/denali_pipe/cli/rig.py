@@ -45,7 +45,8 @@ def cmd_rig_vs_real(args: argparse.Namespace) -> None:
     if len(args.sets) != len(args.backgrounds):
         raise ValueError(f"rig-vs-real: {len(args.sets)} sets but {len(args.backgrounds)} backgrounds")
     stats = Path(args.feature_stats) if args.feature_stats else None
-    rig_vs_real(list(zip(map(Path, args.sets), map(Path, args.backgrounds))), Path(args.png), Path(args.csv), stats)
+    scores = Path(args.release_models) if args.release_models else None
+    rig_vs_real(list(zip(map(Path, args.sets), map(Path, args.backgrounds))), Path(args.png), Path(args.csv), stats, scores)
     log.info("wrote %s and %s", args.png, args.csv)
 
 
@@ -71,4 +72,5 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument(
         "--feature-stats", default=None, help="folder of the release's 1D CNN backbones and BN statistics (REFERENCE Part 7); omit for no feature-moment panels"
     )
+    s.add_argument("--release-models", default=None, help="results/release_models.csv: the release's networks on these captures; omit for no such panel")
     s.set_defaults(func=cmd_rig_vs_real)

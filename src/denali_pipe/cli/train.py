@@ -41,7 +41,10 @@ def cmd_train(args: argparse.Namespace) -> None:
     else:
         device = training_device(torch.cuda.is_available())
         hyper = Hyper(**args.hyper)
-        result = run_cell(x, samples, cell, hyper, args.validation_fraction, args.factory, device, args.budget_seconds, args.precision, cpu_has_native_bf16())
+        weights = Path(args.release_weights) if args.release_weights else None
+        result = run_cell(
+            x, samples, cell, hyper, args.validation_fraction, args.factory, device, args.budget_seconds, args.precision, cpu_has_native_bf16(), weights
+        )
     with atomic_dir(Path(args.outdir)) as tmp:
         (tmp / METRICS_FILE).write_text(result.metrics.to_json())
         result.curves.to_csv(tmp / "curves.csv", index=False)
@@ -77,7 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("dataset", help="datasets/<res>.zarr")
     s.add_argument("--table", required=True, help="datasets/<res>.parquet")
     s.add_argument("--cell", type=json_arg, required=True, help='JSON {"model", "task", "split", "resolution", "condition", "protocol", "seed"}')
-    s.add_argument("--hyper", type=json_arg, required=True, help='JSON {"lr", "epochs", "batch_size", "norm"} ({} for the linear model)')
+    s.add_argument("--hyper", type=json_arg, required=True, help='JSON {"lr", "epochs", "batch_size", "norm"[, "init"]} ({} for the linear model)')
     s.add_argument(
         "--factory", default=None, help="the network's factory 'package.module:factory' (config train.models.<model>.factory; not for the linear model)"
     )
@@ -91,5 +94,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     s.add_argument("--budget-seconds", type=float, default=None, help="stop a network's training after this much training time")
     add_time_axis(s, needed_by="a jitter condition's blur (FWHM in ps)")
+    s.add_argument("--release-weights", default=None, help="results/release_weights, where --hyper's init names a release checkpoint to start from")
     s.add_argument("--outdir", required=True, help="output run folder: metrics.json, curves.csv, model.pt")
     s.set_defaults(func=cmd_train)

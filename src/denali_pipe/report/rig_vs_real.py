@@ -18,7 +18,12 @@ real one. When the release's feature statistics are given (config
 `rig_vs_real.feature_stats`), a panel per layer below holds Part 7's
 feature-moment distance of the same captures for each of the 18 release
 nets (`rig.feature_moments`); without them there are no such panels and the
-figure and the log say so.
+figure and the log say so. Given the release's 15 trained networks' scores on
+this run's captures (`results/release_models.csv`,
+experiments.release_models), a last row sets each network's score per
+lighting beside its baseline, per task, with the correlation of its location
+predictions' x and y with the true ones; where no network was scored, the
+title says why.
 """
 
 from __future__ import annotations
@@ -35,6 +40,8 @@ from denali_pipe.io.store import open_set
 from denali_pipe.report.paper import REAL_CENTRE_ZONE, REAL_LOG_ZONE_MEANS, REAL_ZONE_MEANS
 from denali_pipe.rig import feature_moments as fm
 from denali_pipe.rig.measure import measure
+from denali_pipe.train.cells import TASKS
+from denali_pipe.train.runs import HEADLINE
 
 log = logging.getLogger(__name__)
 
@@ -61,11 +68,22 @@ COLUMNS = (
     "real_mean_counts",
     "mean_z",
     "real_mean_z",
+    "network",
+    "task",
+    "light",
+    "metric",
+    "value",
+    "baseline",
+    "n_samples",
+    "corr_x",
+    "corr_y",
 ) + fm.COLUMNS
 # Source labels of the per-zone rows.
 ZONE_SOURCE = "capture source, every zone"
 REAL_ZONE_SOURCE = "real, every zone (release's models)"
 FEATURE_SOURCE = "capture source, feature moments"
+RELEASE_SOURCE = "capture source, release networks"
+LIGHT_COLOURS = {"lightoff": "tab:blue", "lighton": "tab:orange"}
 # The real captures' pooled spread of log1p(counts) (the release's generalisation checkpoints).
 REAL_LOG_SPREAD = 0.78
 
@@ -180,13 +198,64 @@ def plot_layer(ax, table: pd.DataFrame, layer: int) -> None:
     ax.legend(fontsize=7, loc="upper right")
 
 
-def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path, feature_stats: Path | None = None) -> pd.DataFrame:
+def release_scores(table: pd.DataFrame) -> tuple[pd.DataFrame, str]:
+    """The per-lighting rows of the release networks' table
+    (experiments.release_models.COLUMNS) that scored captures, as this
+    figure's CSV rows, and a line for the title: how many networks beat
+    their baseline on both lightings together, or why none was scored."""
+    scored = table[table.n_samples > 0]
+    if scored.empty:
+        notes = table.note.dropna().unique()
+        return pd.DataFrame(columns=list(COLUMNS)), f"release networks: none scored ({notes[0] if len(notes) else 'no captures'})"
+    both = scored[scored.light == "both"]
+    higher = both.task.map(lambda task: HEADLINE[task][1])
+    better = np.where(higher, both.value > both.baseline, both.value < both.baseline)
+    rows = scored[scored.light != "both"].assign(source=RELEASE_SOURCE)
+    return rows.reindex(columns=list(COLUMNS)), f"release networks: {int(better.sum())} of {len(both)} beat their baseline on these captures (both lightings)"
+
+
+def plot_release(axes, rows: pd.DataFrame) -> None:
+    """Per task (cells.TASKS) a panel: each network's score per lighting as
+    bars, its baseline as a dashed line over them, and for location the
+    correlations of its predicted x and y with the true ones."""
+    for ax, task in zip(axes, TASKS):
+        t = rows[rows.task == task]
+        if t.empty:
+            ax.set_visible(False)
+            continue
+        nets = list(dict.fromkeys(t.network))
+        lights = [li for li in LIGHT_COLOURS if li in set(t.light)]
+        width = 0.8 / len(lights)
+        for j, light in enumerate(lights):
+            r = t[t.light == light].set_index("network").reindex(nets)
+            x = np.arange(len(nets)) - 0.4 + (j + 0.5) * width
+            ax.bar(x, r.value, width=width, color=LIGHT_COLOURS[light], label=light)
+            ax.hlines(r.baseline, x - width / 2, x + width / 2, color="k", ls="--", lw=1.2, label="baseline" if j == 0 else None)
+            if task == "location":
+                for xi, v, cx, cy in zip(x, r.value, r.corr_x, r.corr_y):
+                    # inside the bar, upright: neighbouring bars' labels cannot overlap
+                    ax.text(xi, v / 2, f"x {cx:+.2f}  y {cy:+.2f}", ha="center", va="center", rotation=90, fontsize=5.5, color="white")
+        metric = t.metric.iloc[0]
+        ax.set_xticks(np.arange(len(nets)), nets, rotation=60, ha="right", fontsize=6)
+        ax.set_ylabel("RMSE (m), lower is better" if metric == "rmse" else "Top-1, higher is better", fontsize=8)
+        ax.set_ylim(0, 1.35 * np.nanmax(np.r_[t.value, t.baseline]))
+        kind = "the scored positions' mean" if metric == "rmse" else "chance, 1 / classes"
+        corr = "\nin the bars: r of predicted and true x, y" if task == "location" else ""
+        ax.set_title(f"release networks, {task}, per lighting\ndashed: baseline ({kind}){corr}", fontsize=8)
+        ax.legend(fontsize=6, loc="upper right", ncols=3)
+
+
+def rig_vs_real(
+    pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path, feature_stats: Path | None = None, release_models: Path | None = None
+) -> pd.DataFrame:
     """Measure each (object set store, NOOBJECT store) pair's centre zone and
     plot it; every zone's mean counts and z over the object sets' captures;
     with `feature_stats` (the folder of the release's backbones and BN
     statistics), Part 7's feature-moment distance of those captures per net
-    and layer. Write the PNG and the CSV (rig rows, the real figures' rows,
-    the zone rows, then the feature rows)."""
+    and layer; with `release_models` (results/release_models.csv), the
+    release networks' scores per task and lighting. Write the PNG and the CSV
+    (rig rows, the real figures' rows, the zone rows, the feature rows, then
+    the release networks' rows)."""
     rows, panels = [], []
     for obj_path, bg_path in pairs:
         obj, bg = open_set(obj_path), open_set(bg_path)
@@ -214,19 +283,29 @@ def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path, fe
             f"(layers 1 / 2 / 3: {yard['layer 1']:.2f} / {yard['layer 2']:.2f} / {yard['layer 3']:.2f}; raw-count nets' layer-1 variance term {yard['raw layer-1 var']:.2f})"
         )
         log.info(note)
-    table = pd.concat([pd.DataFrame(rows + real_rows() + zone_rows(means, mean_z)), features], ignore_index=True).reindex(columns=list(COLUMNS))
+    if release_models is None:
+        release, release_note = pd.DataFrame(columns=list(COLUMNS)), "release networks: none (no results/release_models.csv given)"
+    else:
+        release, release_note = release_scores(pd.read_csv(release_models))
+    log.info(release_note)
+    parts = [pd.DataFrame(rows + real_rows() + zone_rows(means, mean_z)), features, release]
+    table = pd.concat([p for p in parts if not p.empty], ignore_index=True).reindex(columns=list(COLUMNS))
 
     ncols = min(2, len(panels))
     nrows = -(-len(panels) // ncols)
-    extra = 0 if features.empty else 1
-    fig = plt.figure(figsize=(max(5.2 * ncols, 13.0 if extra else 9.0), 3.6 * nrows + 3.8 + 4.6 * extra))
-    grid = fig.add_gridspec(nrows + 1 + extra, 6, height_ratios=[1.0] * nrows + [1.0] + [1.25] * extra)
+    extra = [kind for kind, part in (("features", features), ("release", release)) if not part.empty]
+    fig = plt.figure(figsize=(max(5.2 * ncols, 13.0 if extra else 9.0), 3.6 * nrows + 3.8 + 4.6 * len(extra)))
+    grid = fig.add_gridspec(nrows + 1 + len(extra), 6, height_ratios=[1.0] * nrows + [1.0] + [1.25] * len(extra))
     span = 6 // ncols
     axes = np.array([[fig.add_subplot(grid[r, c * span : (c + 1) * span]) for c in range(ncols)] for r in range(nrows)])
     plot_zones(fig.add_subplot(grid[nrows, :]), means, spread, mean_z)
-    if extra:
-        for i, layer in enumerate(fm.LAYERS):
-            plot_layer(fig.add_subplot(grid[nrows + 1, 2 * i : 2 * i + 2]), features, layer)
+    for row, kind in enumerate(extra, start=nrows + 1):
+        thirds = [fig.add_subplot(grid[row, 2 * i : 2 * i + 2]) for i in range(3)]
+        if kind == "features":
+            for ax, layer in zip(thirds, fm.LAYERS):
+                plot_layer(ax, features, layer)
+        else:
+            plot_release(thirds, release)
     bins = np.arange(geo.N_BINS)
     for ax in axes.flat[len(panels) :]:
         ax.set_visible(False)
@@ -250,7 +329,8 @@ def rig_vs_real(pairs: list[tuple[Path, Path]], out_png: Path, out_csv: Path, fe
     axes[0][0].legend(fontsize=7, loc="center right")
     real = "\n".join(f"{name}: {real_summary(v)}" for name, v in REAL_CENTRE_ZONE.items())
     fig.suptitle(
-        f"Raw centre-zone histograms, zoomed to {ZOOM:.0%} of the direct peak. Real captures, read off the release's figures:\n{real}\n{note}", fontsize=8
+        f"Raw centre-zone histograms, zoomed to {ZOOM:.0%} of the direct peak. Real captures, read off the release's figures:\n{real}\n{note}\n{release_note}",
+        fontsize=8,
     )
     fig.tight_layout()
     save_figure(fig, out_png, table, out_csv)

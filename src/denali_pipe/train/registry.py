@@ -26,6 +26,7 @@ import re
 import sys
 from collections.abc import Callable
 
+from denali_pipe.io.release_weights import release_checkpoint
 from denali_pipe.train.cells import LINEAR, TASKS
 
 N_LOCATION_OUTPUTS = 2  # x, y in metres
@@ -64,10 +65,10 @@ def _split(name: str, path: object) -> tuple[str, str]:
 def check_models(models: dict, benchmark_model: str) -> dict[str, dict]:
     """The registered models of a config's `train.models` (entries set to
     null are dropped: that is how a config leaves out a default model), in
-    config order, after checking each name and that each factory's module
-    can be found (without importing it). ValueError naming the config key
-    otherwise, or when `benchmark_model` (train.benchmark_model) is not one
-    of them."""
+    config order, after checking each name, that each factory's module
+    can be found (without importing it) and that each `init` names a
+    release checkpoint. ValueError naming the config key otherwise, or when
+    `benchmark_model` (train.benchmark_model) is not one of them."""
     registered = {name: entry for name, entry in models.items() if entry is not None}
     if not registered:
         raise ValueError(f"{KEY}: no model registered")
@@ -82,6 +83,13 @@ def check_models(models: dict, benchmark_model: str) -> dict[str, dict]:
             raise ValueError(f"{KEY}.{name}.factory: module {module!r} cannot be imported ({e})") from None
         if not found:
             raise ValueError(f"{KEY}.{name}.factory: no module {module!r} on the Python path or in the workflow folder {os.getcwd()}")
+        for task in TASKS:
+            init = (entry.get(task) or {}).get("init")
+            if init is not None:
+                try:
+                    release_checkpoint(init)
+                except ValueError as e:
+                    raise ValueError(f"{KEY}.{name}.{task}.{e}") from None
     if benchmark_model not in registered:
         raise ValueError(f"train.benchmark_model: {benchmark_model!r} is not a registered model of {KEY} ({', '.join(registered)})")
     return registered

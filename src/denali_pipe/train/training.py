@@ -35,6 +35,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -53,6 +54,7 @@ from denali_pipe.train.divergence import Losses, Snapshot, diverged, replay, sta
 from denali_pipe.train.models import forward_flops, n_params
 from denali_pipe.train.precision import check_bfloat16, training_precision
 from denali_pipe.train.registry import build
+from denali_pipe.train.release_nets import init_from_release, init_path
 from denali_pipe.train.saved_cell import SavedCell
 
 log = logging.getLogger(__name__)
@@ -68,12 +70,15 @@ MIN_TARGET_STD = 1e-3  # m: a training part at one position still standardises
 @dataclass(frozen=True)
 class Hyper:
     """Training settings of one (model, task): learning rate, epochs, batch
-    size and input normalisation ("raw" or "log_z")."""
+    size, input normalisation ("raw" or "log_z"), and the release checkpoint
+    a cell's network starts from instead of its initialisation
+    ('release:<file>', release_nets.init_from_release; None: from scratch)."""
 
     lr: float
     epochs: int
     batch_size: int
     norm: str
+    init: str | None = None
 
 
 @dataclass
@@ -355,6 +360,7 @@ def run_cell(
     budget_seconds: float | None = None,
     precision: str = "float32",
     native_bf16: bool = False,
+    release_weights: Path | None = None,
 ) -> Result:
     """Train one cell on (N, n, n, T) features `x` with sample table `samples`
     (`fit`, with the selection metric of `selection_key` on the validation
@@ -363,7 +369,9 @@ def run_cell(
     network is model `cell.model` built by `factory` ('package.module:factory',
     the registry's contract). precision: config `train.precision`, resolved
     by `precision.training_precision` (native_bf16: whether this CPU
-    multiplies bfloat16 natively, `precision.cpu_has_native_bf16`)."""
+    multiplies bfloat16 natively, `precision.cpu_has_native_bf16`).
+    release_weights: the folder of the release's weights (rule
+    release_weights) where `hp.init` names a checkpoint to start from."""
     if cell.protocol not in PROTOCOLS:
         raise ValueError(f"unknown protocol {cell.protocol!r}; expected one of {PROTOCOLS}")
     torch.manual_seed(cell.seed)
@@ -384,7 +392,12 @@ def run_cell(
     n_classes = 2 if cell.task == "location" else len(classes)
 
     input_shape = tuple(int(d) for d in x.shape[1:])
-    model = build(cell.model, factory, cell.task, input_shape, n_classes).to(dev)
+    model = build(cell.model, factory, cell.task, input_shape, n_classes)
+    if hp.init is not None:
+        # the release's weights, then training as from any start (under `clean` a location head regresses standardised positions)
+        fresh = init_from_release(model, init_path(hp.init, release_weights))
+        log.info("starts from %s%s", hp.init, f" (left at their initialisation: {', '.join(fresh)})" if fresh else "")
+    model = model.to(dev)
     flops = forward_flops(model, input_shape)
     dtype, check = training_precision(precision, dev.type, native_bf16, lambda: check_bfloat16(model, input_shape, cell.task, n_classes, loss_for(cell.task)))
     log.info("trains in %s%s", str(dtype).removeprefix("torch."), "" if check is None else f" (bfloat16's check: {check})")

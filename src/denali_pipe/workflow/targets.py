@@ -41,6 +41,7 @@ TARGETS = (
     Target("sensor fit", "the TMF882x's pulse, timing, pile-up and crosstalk fitted to real raw histograms", "results/sensor_fit.json"),
     Target("sensor vs real", "the fitted sensor on real scenes it was not fitted to", "results/sensor_vs_real.csv"),
     Target("rig vs real", "the capture source's histograms beside real DENALI captures", "results/rig_vs_real.png"),
+    Target("release networks", "the release's 15 trained generalisation networks scored on this run's captures", "results/release_models.csv"),
     Target("rig examples", "raw histograms beside their background", "results/rig_examples.png"),
     Target("tag detections", "detection and pose rates per lighting and tag", "results/calibration/detections.csv"),
     Target("capture index", "one row per capture", "results/index/captures.parquet"),
