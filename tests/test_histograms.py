@@ -182,14 +182,14 @@ def test_direct_return_sits_at_the_wall_distance(phot):
 
 
 def test_the_rig_renders_on_its_time_axis(phot):
-    """On a 93-ps axis with zero path at bin 16 the wall return moves by what
-    geometry says it moves between the two axes (the pulse's delay, in bins,
-    and the wall's spread, in metres, move it within half a bin)."""
-    other = dataclasses.replace(phot, time_axis=AXIS_93)
+    """Between the paper's axis and a 93-ps axis with zero path at bin 16 the
+    wall return moves by what geometry says it moves (the pulse's delay, in
+    bins, and the wall's spread, in metres, move it within half a bin)."""
+    paper, other = (dataclasses.replace(phot, time_axis=a) for a in (geo.PAPER_TIME_AXIS, AXIS_93))
     opl = 2 * H.wall_samples("3x3").r[4].mean()
-    move = AXIS_93.opl_to_bin(opl) - phot.time_axis.opl_to_bin(opl)
+    move = AXIS_93.opl_to_bin(opl) - geo.PAPER_TIME_AXIS.opl_to_bin(opl)
     assert abs(move) > 5  # a move the test can see
-    peaks = [peak_bin(H.expected_counts("3x3", False, [], p)[1, 1]) for p in (phot, other)]
+    peaks = [peak_bin(H.expected_counts("3x3", False, [], p)[1, 1]) for p in (paper, other)]
     assert peaks[1] - peaks[0] == pytest.approx(move, abs=0.5)
 
 
@@ -272,7 +272,7 @@ def test_a_rectangular_flood_lights_the_field_corners_more(phot):
     # a diffuser shaped to the receiver's rectangle (beam_contour > 2) keeps
     # the flood's half widths on its axes but sends more light toward the
     # field's diagonals than an ellipse does, so the corner zones gain on the edges
-    flat = dataclasses.replace(phot, beam_yaw_deg=0.0, beam_pitch_deg=0.0, core_share=0.0)
+    flat = dataclasses.replace(phot, beam_yaw_deg=0.0, beam_pitch_deg=0.0, core_share=0.0, beam_order=1.0)
     ellipse, rectangle = (dataclasses.replace(flat, beam_contour=q) for q in (2.0, 6.0))
     hx, hy = np.tan(np.deg2rad(flat.beam_hwhm_deg))
     on_axes = np.array([[hx, 0, 1], [0, hy, 1]]) / np.linalg.norm([[hx, 0, 1], [0, hy, 1]], axis=1, keepdims=True)
@@ -365,18 +365,20 @@ def test_far_column_holds_the_bright_zones_return_early_by_glare(phot):
 
 
 def test_bump_width_is_the_objects_path_extent_not_the_pulse(phot, mid_scene):
-    # At mid gantry the rig's 8 in square is ~10 bins wide: the centre zone
-    # sees the plate from ~40 deg off its normal, so 2 |q - o| spans ~9 bins
+    # At mid gantry the rig's 8 in square is ~0.23 m of path wide: the centre zone
+    # sees the plate from ~40 deg off its normal, so 2 |q - o| spans ~0.21 m
     # across the plate; the pulse (~2 bins FWHM) adds little and a narrower
     # plate narrows it.
     def width(name, size, p):
         bg = centre(p, mid_scene(name, size)[:1])
         return measure(centre(p, mid_scene(name, size)), bg).bump_fwhm
 
+    # widths in metres of path: the axis sets how many bins they span
+    path = phot.time_axis.bin_width_opl
     sharp = dataclasses.replace(phot, pulse_sigma_bins=0.3, pulse_tail_bins=0.3, slow_tail_fraction=0.0)
-    assert width("square", "8inch", phot) > 9
-    assert width("square", "8inch", sharp) > 8  # a near-delta pulse leaves the width
-    assert width("square", "4inch", phot) < width("square", "8inch", phot) - 2.5
+    assert width("square", "8inch", phot) * path > 0.21
+    assert width("square", "8inch", sharp) * path > 0.19  # a near-delta pulse leaves the width
+    assert (width("square", "4inch", phot) - width("square", "8inch", phot)) * path < -0.06
 
 
 def test_bump_width_matches_the_release_capture_at_its_gantry_location(phot, mid_scene):

@@ -11,7 +11,7 @@ from conftest import REPO
 from scipy.stats import exponnorm
 
 from denali_pipe.sensor.captures import BINS, SWEEP, ZONES, Captures, read_captures
-from denali_pipe.sensor.fit import CENTRE, CRITERIA, Timing, fit_sweep, held_out, held_out_scores, predict, scores, split_sweep
+from denali_pipe.sensor.fit import CENTRE, CRITERIA, Timing, bin_width_ps, fit_sweep, held_out, held_out_scores, predict, scores, split_sweep
 from denali_pipe.sensor.response import counts_from_rates, pulse_area, pulse_at, pulse_centre, pulse_offsets, tail_summary
 
 REAL = REPO.parent / "shared" / "real-tmf8820"
@@ -142,3 +142,11 @@ def test_the_crosstalk_is_needed(real):
     fit, test = real
     assert np.abs(cover_glass_error(fit, test)).max() < 0.03
     assert np.abs(cover_glass_error(dataclasses.replace(fit, crosstalk=np.zeros(ZONES)), test)).min() > 0.04
+
+
+@needs_real
+def test_the_configured_bin_width_is_the_fitted_one(real, demo_config):
+    # config sensor.time_axis holds the real sensor's width (its zero bin is DENALI's, from the release's figure)
+    fit, _ = real
+    fitted = bin_width_ps(fit.timing.bins_per_metre[CENTRE])
+    assert demo_config["sensor"]["time_axis"]["bin_width_ps"] == pytest.approx(fitted, abs=0.1)

@@ -57,6 +57,10 @@ class TimeAxis:
         """Sensor-relative OPL at the left edge of bin 0, m: -(zero_bin + 0.5) w."""
         return (-0.5 - self.zero_bin) * self.bin_width_opl  # +0.0, not -0.0, for the paper's axis
 
+    def label(self) -> str:
+        """A time-bin axis's title: the bin's time on this axis."""
+        return f"time bin ({self.bin_width_ps:.0f} ps)"
+
     def opl_to_bin(self, opl: np.ndarray | float) -> np.ndarray | float:
         """Fractional bin index of a sensor-relative optical path length (m):
         bin b covers [b, b + 1)."""

@@ -24,7 +24,7 @@ row belongs to:
   (`MODEL`, `MEAN_BASELINE`, `CHANCE`), value (mean over seeds), std (ddof 1;
   0 for one seed), n_seeds, n_samples (per seed);
 - `histogram` (Fig 10): object, data (`NONRR` or `RR`), size, light,
-  location, bin (absolute, 3/128 m of optical path), value (mean counts over
+  location, bin (absolute, on config sensor.time_axis), value (mean counts over
   the repeats), std (over the repeats), n_samples (repeats).
 """
 
@@ -205,7 +205,7 @@ def fig10(cells: list[CellMetrics], evaluations: list[Evaluation], histograms: p
         ax.axhline(0, color="k", lw=0.6)
         first = h.iloc[0]
         ax.set_title(f"centre zone, {first['size']} {first['light']}, location {int(first['location'])}", fontsize=9)
-        ax.set_xlabel("bin (3/128 m optical path, 78 ps)")
+        ax.set_xlabel("time bin (config sensor.time_axis)")
         ax.set_ylabel(f"counts above background\n(mean +- std of {int(first['n_samples'])} repeats)", fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)

@@ -23,11 +23,6 @@ FRAME_JPEG_QUALITY = 90  # the frame travels as a JPEG: a fifth of a PNG's bytes
 MARGIN = dict(l=55, r=15, t=62, b=45)
 
 
-def bin_title(axis: geo.TimeAxis) -> str:
-    """A time-bin axis's title: the bin's time on `axis`."""
-    return f"time bin ({axis.bin_width_ps:.0f} ps)"
-
-
 def title(main: str, detail: str = "") -> dict:
     """A panel title: a short line (clear of the mode bar on the right) and a smaller line of detail."""
     return dict(text=f"{main}<br><sup>{detail}</sup>" if detail else main, font=dict(size=15), x=0.01, xanchor="left")
@@ -116,7 +111,7 @@ def histogram_grid(
             if zone_starts is not None:
                 start = int(zone_starts[r, c])
                 shapes.append(dict(type="line", xref=f"x{k}", yref=f"y{k} domain", x0=start, x1=start, y0=0, y1=1, line=dict(color=TWIN, width=1, dash="dash")))
-    layout[f"xaxis{_suffix((n - 1) * n + (n + 1) // 2)}"]["title"] = dict(text=bin_title(axis))  # the bottom row's middle subplot
+    layout[f"xaxis{_suffix((n - 1) * n + (n + 1) // 2)}"]["title"] = dict(text=axis.label())  # the bottom row's middle subplot
     layout[f"yaxis{_suffix(((n + 1) // 2 - 1) * n + 1)}"]["title"] = dict(text=f"counts{' (log)' if log_y else ''}")  # the left column's middle one
     layout["shapes"] = shapes
     return dict(data=data, layout=layout)
@@ -144,7 +139,7 @@ def centre_figure(
         template=template,
         title=heading,
         margin=MARGIN,
-        xaxis_title=bin_title(axis),
+        xaxis_title=axis.label(),
         yaxis_title="counts above background",
         legend=dict(orientation="h", y=-0.2, yanchor="top"),
     )

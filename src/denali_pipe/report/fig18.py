@@ -124,7 +124,7 @@ def fig18(captures: list[tuple[Path, Path, Path]], scene_json: Path, calibration
                     }
                 )
             )
-        zone_axes[-1, 1].set_xlabel(f"bin (3/128 m optical path), bins >= {crop}", fontsize=7)
+        zone_axes[-1, 1].set_xlabel(f"{axis.label()}, bins >= {crop}", fontsize=7)
         zone_axes[1, 0].set_ylabel("counts", fontsize=7)
         handles, labels = zone_axes[0, 0].get_legend_handles_labels()
         right.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=7, frameon=False)

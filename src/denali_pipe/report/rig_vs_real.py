@@ -316,7 +316,7 @@ def rig_vs_real(
         ax.axvline(m.bump_bin, color="tab:red", ls="--", lw=0.8, label="bump peak")
         ax.set_ylim(0, ZOOM * m.direct_peak)
         ax.set_xlim(0, geo.N_BINS)
-        ax.set_xlabel("bin (3/128 m optical path, 78 ps)")
+        ax.set_xlabel("time bin (config sensor.time_axis)")
         ax.set_ylabel("counts")
         ax.set_title(f"{cs.object} {cs.size} {cs.light}, location {k}", fontsize=9)
         text = (

@@ -48,7 +48,7 @@ def plot_calibration(result: Result, held: Problem, out_png: Path) -> None:
         if c == 0:
             ax.set_ylabel("counts", fontsize=8)
         if r == GRID - 1:
-            ax.set_xlabel("bin (3/128 m optical path)", fontsize=8)
+            ax.set_xlabel("time bin (config sensor.time_axis)", fontsize=8)
         rows.append(pd.DataFrame({"zone_row": r, "zone_col": c, "bin": bins, "real": held.y[i, z], "before": before[z], "after": after[z]}))
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=8, frameon=False)

@@ -75,7 +75,7 @@ def rig_examples(pairs: list[tuple[Path, Path]], axis: geo.TimeAxis, out_png: Pa
             twin.axhline(0, color="tab:red", lw=0.5, ls=":")
             twin.set_ylabel("difference (counts)", color="tab:red")
             ax.set_title(f"{cs.resolution} {cs.light}, location {k} ({geo.wall_distance(geo.object_pose(k).t):.2f} m), zone {zone}", fontsize=9)
-            ax.set_xlabel("bin (3/128 m OPL)")
+            ax.set_xlabel(axis.label())
             ax.set_ylabel("counts (mean of repeats)")
             if k == picks[0]:
                 ax.legend(fontsize=7, loc="upper left")
