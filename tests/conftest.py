@@ -1,3 +1,5 @@
+import importlib
+import sys
 from pathlib import Path
 
 import pytest
@@ -7,6 +9,15 @@ REPO = Path(__file__).resolve().parents[1]
 ASSETS = REPO.parent / "shared" / "denali-assets"
 # The release's own benchmark code (MIT): tests compare against it; the project never imports it.
 REFERENCE = REPO.parent / "shared" / "reference" / "benchmark"
+
+
+def reference_module(module: str):
+    """A module of the release's own benchmark code (`../shared/reference`), imported without leaving it on the path."""
+    sys.path.insert(0, str(REFERENCE))
+    try:
+        return importlib.import_module(module)
+    finally:
+        sys.path.remove(str(REFERENCE))
 
 
 @pytest.fixture(scope="session")

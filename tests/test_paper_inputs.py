@@ -11,13 +11,11 @@ labels, transformed inputs and the train and test indices must be identical.
 
 from __future__ import annotations
 
-import importlib
 import json
-import sys
 
 import numpy as np
 import pytest
-from conftest import REFERENCE
+from conftest import REFERENCE, reference_module
 
 from denali_pipe.core.capture_sets import FOLDER_SUFFIX, parse_set_name
 from denali_pipe.ingest.capture_set import ingest_release
@@ -37,14 +35,6 @@ LOCATIONS = [40, 12, 0, 7, 3]
 REPEATS = 3
 SEEDS = (42, 43)
 REF_KEY = {"location": "locations", "shape": "objects", "size": "sizes"}
-
-
-def _reference(module: str):
-    sys.path.insert(0, str(REFERENCE))
-    try:
-        return importlib.import_module(module)
-    finally:
-        sys.path.remove(str(REFERENCE))
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +76,7 @@ def ours(tree, catalogue):
 def theirs(tree):
     """The reference's query, exactly as its `build_query` makes it, and its data module."""
     raw, positions, _, _ = tree
-    data = _reference("main_table.data")
+    data = reference_module("main_table.data")
     query = data.DataSet.from_raw_captures(raw).query_data(
         capture_resolutions=["3x3"],
         average_spad_histograms=False,
@@ -158,7 +148,7 @@ def test_grouped_split_indices(ours, theirs, seed):
     lists stored in its checkpoints (tests/test_splits.py draws those)."""
     _, samples = ours
     query, _ = theirs
-    ref_test = _reference("generalization.splits")._split_random_grouped(query, 0.3, seed)
+    ref_test = reference_module("generalization.splits")._split_random_grouped(query, 0.3, seed)
     y, _ = targets(samples, "location")
     split, _ = partition(samples, y, Cell("cnn1d", "location", "repeats_grouped", "3x3", "paper", seed), validation_fraction=0.2)
     assert np.array_equal(split.test, np.sort(ref_test))

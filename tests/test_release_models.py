@@ -13,14 +13,12 @@ project through ingest, `paper_samples` and `evaluate_network`."""
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import json
-import sys
 
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import REFERENCE, REPO
+from conftest import REFERENCE, REPO, reference_module
 
 from denali_pipe.core.capture_sets import FOLDER_SUFFIX, parse_set_name
 from denali_pipe.experiments import release_models as rm
@@ -168,14 +166,6 @@ def one_thread():
     torch.set_num_threads(threads)
 
 
-def _reference(module: str):
-    sys.path.insert(0, str(REFERENCE))
-    try:
-        return importlib.import_module(module)
-    finally:
-        sys.path.remove(str(REFERENCE))
-
-
 @pytest.fixture(scope="module")
 def tree(tmp_path_factory, catalogue):
     """(raw tree, tag1_positions.json, {dataset: (x, samples)}): random counts
@@ -209,7 +199,7 @@ def tree(tmp_path_factory, catalogue):
 def theirs(tree, tmp_path_factory):
     """The reference's base query (as its build_query makes it), its joblib dataset folder, its modules."""
     raw, positions, _ = tree
-    data = _reference("main_table.data")
+    data = reference_module("main_table.data")
     dataset = data.DataSet.from_raw_captures(raw)
     query = dataset.query_data(
         capture_resolutions=["3x3"],
@@ -219,7 +209,7 @@ def theirs(tree, tmp_path_factory):
     )
     held_out_root = tmp_path_factory.mktemp("saved")
     dataset.save_to_directory(held_out_root / "saved_dataset")
-    modules = {m: _reference(f"generalization.{m}") for m in ("experiments", "splits", "loaders", "evaluate")}
+    modules = {m: reference_module(f"generalization.{m}") for m in ("experiments", "splits", "loaders", "evaluate")}
     return query, held_out_root, modules
 
 
