@@ -1,9 +1,10 @@
 # The TMF882x sensor fitted to real raw histograms (config sensor; docs/sensor.md).
+from denali_pipe.sensor.captures import SWEEP
 
 
 def sensor_inputs(wildcards):
     # the real sweep where the folder holds one; else nothing, and the target says so
-    sweep = Path(config["sensor"]["real_dir"]) / "iccp_distance_sweep.npz"
+    sweep = Path(config["sensor"]["real_dir"]) / SWEEP
     return [str(sweep)] if sweep.is_file() else []
 
 
@@ -31,7 +32,7 @@ def scene_inputs(wildcards):
     folder = Path(config["sensor"]["real_dir"])
     if not folder.is_dir():
         return []
-    return sorted(str(p) for p in folder.glob("*.npz") if p.name != "iccp_distance_sweep.npz") + sorted(str(p) for p in folder.glob("*.stl"))
+    return sorted(str(p) for p in folder.glob("*.npz") if p.name != SWEEP) + sorted(str(p) for p in folder.glob("*.stl"))
 
 
 rule sensor_vs_real:

@@ -38,14 +38,13 @@ import pandas as pd
 from scipy.optimize import nnls
 
 from denali_pipe.sensor.captures import BINS, ZONES, Captures
-from denali_pipe.sensor.fit import SensorFit, grid_minimum, scores
+from denali_pipe.sensor.fit import TAIL, SensorFit, grid_minimum, scores
 from denali_pipe.sensor.response import counts_from_rates, pulse_at, rates_from_counts
 from denali_pipe.sensor.zones import plane_view, zone_rays
 
 BIN = np.arange(BINS)
-# Windows about each zone's measured peak (bins) that the residual is split into; the floor is the rest.
-PEAK, TAIL = (-3, 4), (5, 20)
-WINDOWS = ("peak", "tail", "floor")
+# The window about each zone's measured peak (bins) that the residual is split into, beside the fit's TAIL; the floor is the rest.
+PEAK = (-3, 4)
 # Rays per side of each zone's field: 24^2 = 576 a zone puts a 5 cm object's edge within a ray of 0.4 deg.
 RAYS_PER_SIDE = 24
 # Each ray's return is placed on a grid of 1/FINE bin before the pulse spreads it.
@@ -55,6 +54,7 @@ FINE = 8
 # size (the sensor's pulse, timing and pile-up alone, as the sweep's held-out captures are scored).
 MODES = ("render", "free")
 SHIFT_GRID = np.linspace(-1.5, 1.5, 31)  # bins: each capture's time shift searched
+ROUNDS = 2  # alternations of the albedos (or amplitudes) and the shifts
 
 
 @dataclass(frozen=True)
@@ -202,7 +202,7 @@ def _nonnegative(X: np.ndarray, w: np.ndarray, y: np.ndarray) -> np.ndarray:
     return best
 
 
-def fit_scene(fit: SensorFit, captures: Captures, fine: np.ndarray, mode: str, rounds: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def fit_scene(fit: SensorFit, captures: Captures, fine: np.ndarray, mode: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(expected counts (N, ZONES, BINS), each capture's time shift (N,)
     bins, the albedos (2,) or None): the captures' rates fitted by the
     rendered returns `fine` (ray_returns) in one of MODES, each capture's
@@ -212,7 +212,7 @@ def fit_scene(fit: SensorFit, captures: Captures, fine: np.ndarray, mode: str, r
     rates, sd = rates_from_counts(captures.hists, fit.cycles)
     y, w = rates - crosstalk_rates(fit)[None], 1 / sd**2
     shift, albedo = np.zeros(len(y)), None
-    for _ in range(rounds):
+    for _ in range(ROUNDS):
         unit = np.stack([through_pulse(fit, f, s) for f, s in zip(fine, shift)])
         albedo = _albedos(y, w, unit) if mode == "render" else None
         costs = np.stack([(w * (y - _scene_rates(y, w, u, albedo)) ** 2).sum(axis=(1, 2)) for u in (through_pulse(fit, fine, s) for s in SHIFT_GRID)], axis=1)
